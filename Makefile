@@ -1,0 +1,29 @@
+# Two set-up commands that work on a fresh machine with only Python 3.11:
+#   make demo   -> .venv, install, flatten a generated mesh, results in out/
+#   make test   -> .venv, install with test extras, run the test suite
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+
+.PHONY: demo test venv clean bench
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install --quiet --upgrade pip
+	$(PIP) install --quiet -e ".[test,peers]"
+	touch $@
+
+venv: $(VENV)/.installed
+
+demo: venv
+	$(PY) -m jaxparam.demo --out out
+
+test: venv
+	$(PY) -m pytest -q -p no:cacheprovider tests
+
+bench: venv
+	$(PY) benchmarks/linear.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

@@ -1,0 +1,37 @@
+"""jaxparam: differentiable parameterization of triangle meshes and point sets (Floater & Hormann).
+
+Importing jaxparam turns on JAX's float64 mode (``jax_enable_x64``): every
+computation of the library is double precision, and so are the JAX arrays you
+create after the import.  Import jaxparam (or set ``JAX_ENABLE_X64=1``) before
+creating arrays you pass to it.
+
+Example::
+
+    import jaxparam as jp
+    mesh = jp.load("camelhead.off")
+    uv = jp.convex_map(mesh, weights="shape_preserving", boundary="circle")
+    print(jp.distortion(mesh, uv))
+"""
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from . import errors, tol, topology, geometry, boundary, weights, sparse  # noqa: E402
+from . import linear, metrics, shapes  # noqa: E402
+from .errors import (  # noqa: E402
+    DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
+    PointCloudError, SolverError, TopologyError,
+)
+from .mesh import TriMesh, load, save  # noqa: E402
+from .linear import convex_map, least_squares_map  # noqa: E402
+from .metrics import DistortionReport, distortion  # noqa: E402
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "TriMesh", "load", "save", "convex_map", "least_squares_map", "distortion",
+    "DistortionReport", "JaxparamError", "MeshError", "NonManifoldError", "TopologyError",
+    "DegenerateFaceError", "PointCloudError", "MeshFileError", "SolverError",
+    "errors", "tol", "topology", "geometry", "boundary", "weights", "sparse", "linear",
+    "metrics", "shapes",
+]

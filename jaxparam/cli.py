@@ -1,0 +1,213 @@
+"""The ``jaxparam`` command.
+
+Exit codes: 0 done, 2 usage, 3 bad input (the message names the problem and
+where), 4 a solver failed (the message names the stage).  Names take hyphens
+on the command line (``shape-preserving``) and underscores in Python.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_SOLVER = 0, 2, 3, 4
+
+WEIGHTS = ["uniform", "inverse-distance", "shape-preserving", "mean-value", "harmonic"]
+BOUNDARIES = ["circle", "square", "plane"]
+SPACINGS = ["uniform", "chord"]
+
+
+def _py(name: str) -> str:
+    return name.replace("-", "_")
+
+
+def _enable_compile_cache() -> None:
+    """Persistent JAX compilation cache, so a second run skips most compilation."""
+    import jax
+
+    cache = os.environ.get("JAXPARAM_CACHE", str(Path.home() / ".cache" / "jaxparam" / "jax"))
+    try:
+        jax.config.update("jax_compilation_cache_dir", cache)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+    except Exception:  # an old JAX without the option: run uncached
+        pass
+
+
+def _clean(obj):
+    """JSON-safe: non-finite floats become null, numpy scalars plain numbers."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
+        try:
+            obj = obj.item()
+        except (ValueError, AttributeError):
+            pass
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path, data) -> None:
+    from .mesh import atomic_write
+
+    atomic_write(path, lambda f: json.dump(_clean(data), f, indent=2))
+
+
+def report_dict(mesh, uv, *, weights=None, seconds=None, extra=None) -> dict:
+    """The report's metrics as a plain dict (keys as in DESIGN.md)."""
+    from .metrics import distortion
+
+    rep = distortion(mesh, uv, weights=weights).to_dict()
+    out = {k: rep[k] for k in ("vertices", "faces", "flips", "boundary_overlaps", "sym_dirichlet",
+                               "mips", "max_aspect", "angle_distortion", "area_distortion",
+                               "unreferenced_vertices")}
+    out["theorem1"] = rep["theorem1"]
+    if seconds is not None:
+        out["seconds"] = seconds
+    if extra:
+        out.update(extra)
+    return out
+
+
+# -- subcommands -----------------------------------------------------------------------------
+
+def cmd_info(args) -> int:
+    from .mesh import load
+
+    t0 = time.perf_counter()
+    mesh = load(args.mesh)
+    info = mesh.topology.summary()
+    info["file"] = str(args.mesh)
+    info["is_disk"] = bool(mesh.topology.is_disk)
+    info["seconds"] = time.perf_counter() - t0
+    if args.json:
+        print(json.dumps(_clean(info), indent=2))
+    else:
+        for k, v in info.items():
+            print(f"{k:24s} {v}")
+    return EXIT_OK
+
+
+def flatten_mesh(mesh, args, *, say=print):
+    """Run the flatten pipeline on a loaded mesh; returns ``(uv, report)``."""
+    import numpy as np
+
+    from .linear import convex_map
+
+    seconds = {}
+    extra = {"weights": args.weights, "boundary": args.boundary, "spacing": args.spacing}
+    holes = max(0, len(mesh.topology.boundary_loops) - 1)
+    if holes:
+        extra["holes_filled"] = holes
+        say(f"note: {holes} extra boundary loop(s) (holes) filled virtually; the longest loop "
+            "is mapped to the boundary")
+    t = time.perf_counter()
+    uv = convex_map(mesh, weights=_py(args.weights), boundary=args.boundary, spacing=args.spacing)
+    uv = np.asarray(uv)
+    seconds["convex_map"] = time.perf_counter() - t
+    weights_used = _py(args.weights)
+    if args.energy:
+        from .optimize import minimize
+
+        t = time.perf_counter()
+        res = minimize(mesh, _py(args.energy), init=uv, free_boundary=args.free_boundary,
+                       solver=args.solver, max_iters=args.max_iters, verbose=False)
+        seconds["minimize"] = time.perf_counter() - t
+        uv = np.asarray(res.uv)
+        extra.update({"energy": float(res.energy), "iterations": int(res.iterations),
+                      "converged": bool(res.converged), "energy_name": args.energy,
+                      "solver": args.solver, "free_boundary": bool(args.free_boundary)})
+        weights_used = None
+    t = time.perf_counter()
+    rep = report_dict(mesh, uv, weights=weights_used, seconds=seconds, extra=extra)
+    seconds["report"] = time.perf_counter() - t
+    return uv, rep
+
+
+def cmd_flatten(args) -> int:
+    from .mesh import load, save
+
+    _enable_compile_cache()
+    t = time.perf_counter()
+    mesh = load(args.mesh)
+    load_s = time.perf_counter() - t
+    uv, rep = flatten_mesh(mesh, args, say=lambda m: print(m, file=sys.stderr))
+    rep["seconds"]["load"] = load_s
+    t = time.perf_counter()
+    save(args.output, mesh, uv)
+    rep["seconds"]["save"] = time.perf_counter() - t
+    if args.report:
+        write_json(args.report, rep)
+    if args.plot:
+        from .plot import plot_uv
+
+        plot_uv(mesh, uv, args.plot)
+    print(f"{args.output}: {rep['vertices']} vertices, {rep['faces']} faces, {rep['flips']} flipped, "
+          f"max aspect {rep['max_aspect']:.3g}")
+    return EXIT_OK
+
+
+def _add_flatten_options(p) -> None:
+    p.add_argument("--weights", choices=WEIGHTS, default="shape-preserving")
+    p.add_argument("--boundary", choices=BOUNDARIES, default="circle")
+    p.add_argument("--spacing", choices=SPACINGS, default="chord")
+    p.add_argument("--energy", default=None,
+                   help="minimize this energy after the convex map (e.g. symmetric-dirichlet, mips)")
+    p.add_argument("--free-boundary", action="store_true")
+    p.add_argument("--solver", default="newton", choices=["newton", "lbfgs", "jaxopt-lbfgs", "bfgs"])
+    p.add_argument("--max-iters", type=int, default=100)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="jaxparam", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("info", help="topology facts of a mesh")
+    p.add_argument("mesh")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("flatten", help="parameterize a disk mesh")
+    p.add_argument("mesh")
+    p.add_argument("-o", "--output", required=True)
+    _add_flatten_options(p)
+    p.add_argument("--report")
+    p.add_argument("--plot")
+    p.set_defaults(func=cmd_flatten)
+    for extend in _EXTENSIONS:
+        extend(sub)
+    return ap
+
+
+#: Functions ``f(subparsers)`` that add further subcommands (points, remeshing, ...).
+_EXTENSIONS: list = []
+
+
+def main(argv=None) -> int:
+    from .errors import JaxparamError, SolverError
+
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if getattr(args, "solver", None):
+        args.solver = _py(args.solver)
+    try:
+        return args.func(args)
+    except SolverError as exc:
+        print(f"jaxparam {args.command}: solver failed at stage '{exc.stage}': {exc}", file=sys.stderr)
+        return EXIT_SOLVER
+    except JaxparamError as exc:
+        print(f"jaxparam {args.command}: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print(f"jaxparam {args.command}: interrupted; no partial output was written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

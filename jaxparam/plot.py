@@ -1,0 +1,107 @@
+"""Pictures: the UV layout coloured by distortion, and a checkerboard on the surface.
+
+Matplotlib with the Agg backend (no screen needed).  Each function writes a
+PNG and returns the path.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from . import metrics
+
+__all__ = ["plot_uv", "plot_checkerboard"]
+
+
+def _figure(size=(6, 6)):
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt, plt.figure(figsize=size, dpi=110)
+
+
+def plot_uv(mesh, uv, path, *, title: str | None = None, quantity: str = "aspect"):
+    """Draw the UV triangulation coloured per face and save it as PNG.
+
+    **Arguments:** ``quantity``: ``"aspect"`` (``log2(s1/s2)``, 0 for a
+    conformal face) or ``"area"`` (``log2`` of the UV/3D area ratio, rescaled
+    to equal totals).  Flipped faces are drawn in red, boundary loops in black.
+    """
+    import matplotlib.tri as mtri
+
+    U = np.asarray(uv, np.float64)
+    F = mesh.faces
+    fd = metrics.face_distortion(mesh, U)
+    s1, s2 = np.asarray(fd["s1"]), np.asarray(fd["s2"])
+    a3, auv = np.asarray(fd["area3d"]), np.asarray(fd["area_uv"])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if quantity == "area":
+            val = np.log2(np.abs(auv) / a3 * a3.sum() / np.abs(auv).sum())
+            label = "log2 area ratio"
+        else:
+            val = np.log2(s1 / np.abs(s2))
+            label = "log2(σ1/σ2)"
+    val = np.where(np.isfinite(val), val, np.nan)
+    plt, fig = _figure()
+    ax = fig.add_subplot(111)
+    ok = np.all(np.isfinite(U[F]).reshape(len(F), -1), axis=1)
+    tri = mtri.Triangulation(U[:, 0], U[:, 1], F[ok])
+    vmax = np.nanpercentile(np.abs(val[ok]), 99) if np.any(ok) else 1.0
+    coll = ax.tripcolor(tri, facecolors=np.nan_to_num(val[ok]), cmap="viridis",
+                        vmin=0 if quantity == "aspect" else -vmax, vmax=max(vmax, 1e-3),
+                        edgecolors="k" if len(F) < 3000 else "none", linewidth=0.1)
+    fig.colorbar(coll, ax=ax, shrink=0.8, label=label)
+    flipped = np.flatnonzero(auv <= 0)
+    if flipped.size:
+        ft = mtri.Triangulation(U[:, 0], U[:, 1], F[flipped])
+        ax.tripcolor(ft, facecolors=np.ones(flipped.size), cmap="Reds", vmin=0, vmax=1)
+    for loop in mesh.topology.boundary_loops:
+        L = np.append(loop, loop[0])
+        ax.plot(U[L, 0], U[L, 1], "k-", lw=0.8)
+    ax.set_aspect("equal")
+    ax.set_title(title or f"{mesh.name or 'mesh'}: {len(F)} faces, {flipped.size} flipped")
+    ax.set_axis_off()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_checkerboard(mesh, uv, path, *, squares: int = 12, title: str | None = None,
+                      elev: float = 30, azim: float = -60):
+    """Render the surface with a checkerboard texture through ``uv`` (faces coloured by
+    the checker cell of their UV centroid) and save it as PNG."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    U = np.asarray(uv, np.float64)
+    V = np.asarray(mesh.vertices, np.float64)
+    F = mesh.faces
+    lo, hi = np.nanmin(U, 0), np.nanmax(U, 0)
+    c = (U[F].mean(1) - lo) / np.max(hi - lo) * squares
+    check = (np.floor(c[:, 0]) + np.floor(c[:, 1])) % 2
+    P = V[F]
+    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    light = 0.55 + 0.45 * np.abs(n @ np.array([0.3, -0.4, 0.85]) / np.linalg.norm([0.3, -0.4, 0.85]))
+    base = np.where(check[:, None] > 0, np.array([[0.95, 0.6, 0.1]]), np.array([[0.15, 0.3, 0.7]]))
+    colors = np.clip(base * light[:, None], 0, 1)
+    plt, fig = _figure()
+    ax = fig.add_subplot(111, projection="3d")
+    ax.add_collection3d(Poly3DCollection(P, facecolors=colors, edgecolors="none"))
+    mn, mx = V.min(0), V.max(0)
+    mid, r = (mn + mx) / 2, (mx - mn).max() / 2
+    ax.set_xlim(mid[0] - r, mid[0] + r)
+    ax.set_ylim(mid[1] - r, mid[1] + r)
+    ax.set_zlim(mid[2] - r, mid[2] + r)
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_axis_off()
+    ax.set_title(title or f"{mesh.name or 'mesh'}: checkerboard through the UV map")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+    return path

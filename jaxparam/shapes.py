@@ -1,0 +1,145 @@
+"""Meshes the project generates: the survey's examples, spheres and tori.
+
+All are deterministic (a ``seed`` only where randomness is asked for) and
+come back as :class:`~jaxparam.mesh.TriMesh` with counter-clockwise faces.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .mesh import TriMesh
+
+__all__ = ["grid_faces", "plane_grid", "graph_surface", "cylinder_patch", "example5",
+           "disk", "sphere", "torus", "refine"]
+
+
+def grid_faces(nu: int, nv: int) -> np.ndarray:
+    """Faces of a ``nu x nv`` vertex grid (vertex ``i * nv + j``), two triangles a cell,
+    diagonals alternating so the grid has no preferred direction."""
+    i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
+    a = (i * nv + j).ravel()
+    b, c, d = a + nv, a + nv + 1, a + 1
+    flip = ((i + j) % 2 == 1).ravel()
+    t1 = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
+    t2 = np.where(flip[:, None], np.stack([b, c, d], 1), np.stack([a, c, d], 1))
+    return np.concatenate([t1, t2]).astype(np.int64)
+
+
+def _grid_uv(nu: int, nv: int, jitter: float = 0.0, seed: int = 0) -> np.ndarray:
+    u, v = np.meshgrid(np.linspace(0, 1, nu), np.linspace(0, 1, nv), indexing="ij")
+    uv = np.stack([u.ravel(), v.ravel()], 1)
+    if jitter:
+        rng = np.random.default_rng(seed)
+        inner = (uv > 0).all(1) & (uv < 1).all(1)
+        h = 1.0 / (max(nu, nv) - 1)
+        uv[inner] += rng.uniform(-jitter, jitter, (inner.sum(), 2)) * h
+    return uv
+
+
+def plane_grid(nu: int = 10, nv: int = 10, *, jitter: float = 0.0, seed: int = 0,
+               tilt: bool = False) -> TriMesh:
+    """A planar grid over ``[0, 1]^2`` (optionally jittered, optionally tilted into 3D)."""
+    uv = _grid_uv(nu, nv, jitter, seed)
+    V = np.column_stack([uv, np.zeros(len(uv))])
+    if tilt:
+        c, s = np.cos(0.7), np.sin(0.7)
+        V = V @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]]) @ np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
+    return TriMesh(V, grid_faces(nu, nv), name="plane_grid")
+
+
+def graph_surface(n: int = 20, *, jitter: float = 0.0, seed: int = 0) -> TriMesh:
+    """The graph of ``z = 0.4 sin(2 pi x) cos(2 pi y) + 0.3 x^2`` over ``[0, 1]^2`` (survey Fig. 5 style)."""
+    uv = _grid_uv(n, n, jitter, seed)
+    x, y = uv[:, 0], uv[:, 1]
+    z = 0.4 * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y) * 0.5 + 0.3 * x ** 2
+    return TriMesh(np.column_stack([x, y, z]), grid_faces(n, n), name="graph_surface")
+
+
+def cylinder_patch(nu: int = 20, nv: int = 10, *, angle: float = 1.5 * np.pi) -> TriMesh:
+    """A patch of the unit cylinder (survey Example 6): ``(cos u, sin u, v)``, ``u in [0, angle]``."""
+    uv = _grid_uv(nu, nv)
+    u, v = uv[:, 0] * angle, uv[:, 1] * 1.5
+    V = np.column_stack([np.cos(u), np.sin(u), v])
+    # (u, v) increasing is counter-clockwise seen from outside the cylinder.
+    return TriMesh(V, grid_faces(nu, nv), name="cylinder_patch")
+
+
+def example5(n: int = 20) -> TriMesh:
+    """The survey's Example 5 surface ``f(u, v) = (4u^3 + 1, 3u^3 + 3v, v - 2)`` over ``[-1, 1]^2``.
+
+    It is developable (isometric to the plane), so a good map has no distortion.
+    """
+    uv = _grid_uv(n, n) * 2 - 1
+    u, v = uv[:, 0], uv[:, 1]
+    V = np.column_stack([4 * u ** 3 + 1, 3 * u ** 3 + 3 * v, v - 2])
+    return TriMesh(V, grid_faces(n, n), name="example5")
+
+
+def disk(rings: int = 8, *, seed: int | None = None, height: float = 0.0) -> TriMesh:
+    """A triangulated unit disk made of concentric rings (``6 r`` vertices on ring ``r``),
+    optionally lifted by ``z = height * (x^2 - y^2)``; ``seed`` jitters the interior."""
+    pts = [np.zeros((1, 2))]
+    for r in range(1, rings + 1):
+        t = 2 * np.pi * np.arange(6 * r) / (6 * r)
+        pts.append(r / rings * np.column_stack([np.cos(t), np.sin(t)]))
+    P = np.concatenate(pts)
+    if seed is not None:
+        rng = np.random.default_rng(seed)
+        inner = np.linalg.norm(P, axis=1) < 1 - 1e-9
+        P[inner] += rng.uniform(-0.25, 0.25, (inner.sum(), 2)) / rings
+    from scipy.spatial import Delaunay
+    F = Delaunay(P).simplices.astype(np.int64)
+    a = P[F[:, 1]] - P[F[:, 0]]
+    b = P[F[:, 2]] - P[F[:, 0]]
+    neg = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] < 0
+    F[neg] = F[neg][:, [0, 2, 1]]
+    V = np.column_stack([P, height * (P[:, 0] ** 2 - P[:, 1] ** 2)])
+    return TriMesh(V, F, name="disk")
+
+
+def sphere(subdivisions: int = 2) -> TriMesh:
+    """An icosphere of radius 1 (closed, genus 0)."""
+    t = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                  [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    for _ in range(subdivisions):
+        V, F = _split(V, F)
+    V = V / np.linalg.norm(V, axis=1, keepdims=True)
+    return TriMesh(V, F, name="sphere")
+
+
+def torus(nu: int = 24, nv: int = 12, *, R: float = 1.0, r: float = 0.35) -> TriMesh:
+    """A closed torus of genus 1."""
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    u, v = 2 * np.pi * i.ravel() / nu, 2 * np.pi * j.ravel() / nv
+    V = np.column_stack([(R + r * np.cos(v)) * np.cos(u), (R + r * np.cos(v)) * np.sin(u), r * np.sin(v)])
+    a = (i * nv + j).ravel()
+    b = (((i + 1) % nu) * nv + j).ravel()
+    c = (((i + 1) % nu) * nv + (j + 1) % nv).ravel()
+    d = (i * nv + (j + 1) % nv).ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return TriMesh(V, F, name="torus")
+
+
+def _split(V: np.ndarray, F: np.ndarray):
+    """One 1-to-4 midpoint split (vectorized); new vertices follow the old ones."""
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    uniq, inv = np.unique(E, axis=0, return_inverse=True)
+    inv = inv.reshape(3, -1).T + V.shape[0]
+    mids = 0.5 * (V[uniq[:, 0]] + V[uniq[:, 1]])
+    a, b, c = F.T
+    ab, bc, ca = inv.T
+    Fn = np.concatenate([np.stack([a, ab, ca], 1), np.stack([b, bc, ab], 1),
+                         np.stack([c, ca, bc], 1), np.stack([ab, bc, ca], 1)])
+    return np.concatenate([V, mids]), Fn
+
+
+def refine(mesh: TriMesh, times: int = 1) -> TriMesh:
+    """Split every face 1-to-4 ``times`` times (new vertices at edge midpoints)."""
+    V, F = np.asarray(mesh.vertices), mesh.faces
+    for _ in range(times):
+        V, F = _split(V, F)
+    return TriMesh(V, F, validate=False, name=(mesh.name or "mesh") + f"_x{4 ** times}")

@@ -1,0 +1,207 @@
+"""Convex-combination and spring weights, one value per one-ring entry (survey §4, §5).
+
+Each kind is computed for every entry ``(v, w)`` of an *interior* vertex's
+one-ring at once (no loop over vertices), in JAX, differentiable in the
+vertex positions.  The entries are those of :func:`ring_entries`: the
+topology's CSR one-rings restricted to interior rows, anticlockwise.
+
+Two families:
+
+- *spring* weights ``mu`` (``uniform``, ``inverse_distance``, ``harmonic``,
+  user edge weights): symmetric, ``mu_vw = mu_wv``; the map minimizes the
+  spring energy (8) and the system can be solved as a symmetric one;
+- *barycentric* weights (``shape_preserving``, ``mean_value``): one row per
+  vertex, positive, reproducing the vertex from its flattened neighbours.
+
+:func:`convex_weights` normalizes either kind to ``lambda_vw`` summing to 1
+per vertex, the coefficients of eq. (3).
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import MeshError
+from .geometry import safe_norm
+
+__all__ = [
+    "KINDS", "SYMMETRIC_KINDS", "RingEntries", "ring_entries", "entry_weights", "convex_weights",
+    "normalize", "edge_values_to_entries",
+]
+
+KINDS = ("uniform", "inverse_distance", "shape_preserving", "mean_value", "harmonic")
+SYMMETRIC_KINDS = ("uniform", "inverse_distance", "harmonic")
+
+
+@dataclass(frozen=True, eq=False)
+class RingEntries:
+    """The one-ring entries of the interior vertices, as flat numpy arrays.
+
+    **Fields** (``k`` entries, ``ni`` interior vertices):
+    ``entry (k,)`` index into the topology's ring arrays; ``row (k,)`` interior
+    slot of the centre vertex; ``center``, ``nbr``, ``prev``, ``next`` ``(k,)``
+    vertex indices (the neighbour and the ones before/after it, anticlockwise);
+    ``row_start (k,)``, ``row_end (k,)`` entry range of the row; ``degree (ni,)``.
+    """
+
+    entry: np.ndarray
+    row: np.ndarray
+    center: np.ndarray
+    nbr: np.ndarray
+    prev: np.ndarray
+    next: np.ndarray
+    row_start: np.ndarray
+    row_end: np.ndarray
+    degree: np.ndarray
+    n_rows: int
+
+
+@functools.lru_cache(maxsize=16)
+def ring_entries(topology) -> RingEntries:
+    """Build (once per topology) the interior one-ring entries."""
+    t = topology
+    interior_row = ~t.is_boundary[t.ring_row] & t.referenced[t.ring_row]
+    entry = np.flatnonzero(interior_row)
+    center = t.ring_row[entry]
+    row = t.slot[center]
+    degree = np.bincount(row, minlength=t.interior.size)
+    starts = np.zeros(t.interior.size + 1, np.int64)
+    np.cumsum(degree, out=starts[1:])
+    return RingEntries(entry=entry, row=row, center=center, nbr=t.ring_idx[entry],
+                       prev=t.ring_prev[entry], next=t.ring_next[entry],
+                       row_start=starts[row], row_end=starts[row + 1], degree=degree,
+                       n_rows=int(t.interior.size))
+
+
+def _angle(a, b):
+    """Angle between vectors ``a, b: (k, 3)``, stable for small and obtuse angles."""
+    cr = jnp.cross(a, b)
+    return jnp.arctan2(safe_norm(cr), jnp.sum(a * b, -1))
+
+
+def _cot(a, b):
+    """Cotangent of the angle between ``a`` and ``b``: ``a.b / |a x b|``."""
+    return jnp.sum(a * b, -1) / safe_norm(jnp.cross(a, b))
+
+
+@functools.partial(jax.jit, static_argnames=("kind", "n_rows"))
+def _weights_kernel(V, center, nbr, prev, nxt, row, row_start, row_end, degree, *, kind, n_rows):
+    x = V[center]
+    d = V[nbr] - x
+    r = safe_norm(d)
+    if kind == "uniform":
+        return jnp.ones_like(r)
+    if kind == "inverse_distance":
+        return 1.0 / r
+    if kind == "harmonic":
+        # mu_vw = (cot alpha + cot beta) / 2, alpha and beta opposite [v, w] (survey §5).
+        pn, pp = V[nxt], V[prev]
+        cot_a = _cot(x - pn, V[nbr] - pn)
+        cot_b = _cot(x - pp, V[nbr] - pp)
+        return 0.5 * (cot_a + cot_b)
+    # Angles at v between consecutive neighbours: delta_j = ang(v_j, v, v_{j+1}).
+    delta = _angle(d, V[nxt] - x)
+    if kind == "mean_value":
+        # Floater 2003: lambda_j ~ (tan(delta_{j-1}/2) + tan(delta_j/2)) / |v_j - v|.
+        prev_delta = _angle(V[prev] - x, d)
+        return (jnp.tan(0.5 * prev_delta) + jnp.tan(0.5 * delta)) / r
+    if kind == "shape_preserving":
+        return _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows)
+    raise ValueError(kind)
+
+
+def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows):
+    """Floater's shape-preserving weights (survey §4, eq. (7)), all rows at once.
+
+    Step 1, the geodesic polar map: neighbour j goes to ``p_j = r_j (cos phi_j,
+    sin phi_j)`` with ``phi`` the accumulated angles scaled by ``rho = 2 pi /
+    sum(delta)``.  Step 2: for each k, the ray from ``p = 0`` opposite ``p_k``
+    crosses the edge ``[p_l, p_{l+1}]``; the barycentric coordinates of ``p``
+    in ``[p_k, p_l, p_{l+1}]`` are averaged over k (eq. (7)).
+    """
+    total = jax.ops.segment_sum(delta, row, num_segments=n_rows)
+    scale = (2 * jnp.pi / total)[row]
+    cum = jnp.cumsum(delta)
+    excl = cum - delta                                   # global exclusive cumsum
+    phi = scale * (excl - excl[row_start])               # per-row exclusive cumsum, phi_0 = 0
+    p = r[:, None] * jnp.stack([jnp.cos(phi), jnp.sin(phi)], -1)
+    # Locate the edge opposite each p_k by one global search: rows are separated by 8 > 2 pi.
+    keys = row * 8.0 + phi
+    target = jnp.mod(phi + jnp.pi, 2 * jnp.pi)
+    l = jnp.searchsorted(jax.lax.stop_gradient(keys), jax.lax.stop_gradient(row * 8.0 + target),
+                         side="right") - 1
+    l = jnp.clip(l, row_start, row_end - 1)
+    m = jnp.where(l + 1 < row_end, l + 1, row_start)
+    pk, pl, pm = p, p[l], p[m]
+    cross = lambda a, b: a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    ak, al, am = cross(pl, pm), cross(pm, pk), cross(pk, pl)
+    tot = ak + al + am
+    k_idx = jnp.arange(p.shape[0])
+    idx = jnp.concatenate([k_idx, l, m])
+    tau = jnp.concatenate([ak, al, am]) / jnp.concatenate([tot, tot, tot])
+    lam = jax.ops.segment_sum(tau, idx, num_segments=p.shape[0])
+    return lam / degree[row]
+
+
+def entry_weights(vertices, topology, kind: str):
+    """Unnormalized weights of one kind on the interior one-ring entries.
+
+    **Arguments:** ``vertices: (n, 3)``, ``topology``, ``kind`` one of :data:`KINDS`.
+    **Returns:** ``(w, symmetric)``: ``w: (k,)`` in :func:`ring_entries` order and
+    whether ``w`` is a symmetric spring weight (``w_vw = w_wv``).
+    """
+    if kind not in KINDS:
+        raise MeshError(f"weights: unknown weights {kind!r}; use one of {KINDS}.")
+    R = ring_entries(topology)
+    if R.entry.size == 0:
+        raise MeshError("weights: the mesh has no interior vertices; nothing to solve for.")
+    V = jnp.asarray(vertices, dtype=jnp.float64)
+    w = _weights_kernel(V, R.center, R.nbr, R.prev, R.next, R.row, R.row_start, R.row_end,
+                        R.degree, kind=kind, n_rows=R.n_rows)
+    return w, kind in SYMMETRIC_KINDS
+
+
+def normalize(w, topology):
+    """Divide entry weights by their row sums: ``lambda_vw = w_vw / sum_u w_vu`` (survey §5)."""
+    R = ring_entries(topology)
+    return _normalize(w, R.row, n_rows=R.n_rows)
+
+
+@functools.partial(jax.jit, static_argnames=("n_rows",))
+def _normalize(w, row, *, n_rows):
+    s = jax.ops.segment_sum(w, row, num_segments=n_rows)
+    return w / s[row]
+
+
+def convex_weights(mesh, kind: str = "shape_preserving"):
+    """The convex-combination coefficients ``lambda`` of eq. (3) for a mesh.
+
+    **Returns:** ``(k,)`` values in :func:`ring_entries` order; each interior
+    vertex's values sum to 1 (positive for every kind but ``harmonic``).
+
+    Example::
+
+        lam = jp.weights.convex_weights(mesh, "mean_value")
+        R = jp.weights.ring_entries(mesh.topology)   # R.center, R.nbr say which entry is which
+    """
+    w, _ = entry_weights(mesh.vertices, mesh.topology, kind)
+    return normalize(w, mesh.topology)
+
+
+def edge_values_to_entries(edge_values, topology):
+    """Spread per-edge values ``(e,)`` (``topology.edges`` order) onto the interior ring entries."""
+    R = ring_entries(topology)
+    E = topology.edges
+    n = topology.n_vertices
+    keys = E[:, 0] * np.int64(n) + E[:, 1]
+    lo, hi = np.minimum(R.center, R.nbr), np.maximum(R.center, R.nbr)
+    pos = np.searchsorted(keys, lo * np.int64(n) + hi)
+    ev = jnp.asarray(edge_values, dtype=jnp.float64)
+    if ev.shape != (E.shape[0],):
+        raise MeshError(f"weights: edge weights must have shape ({E.shape[0]},), one per edge "
+                        f"of mesh.topology.edges, got {tuple(ev.shape)}.")
+    return ev[pos]

@@ -1,0 +1,45 @@
+"""Shared fixtures: x64 and strict promotion, tiny generated meshes, the shared data folder."""
+import os
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_numpy_rank_promotion", "raise")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxparam as jp  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+if "JAXPARAM_DATA" in os.environ:
+    DATA = Path(os.environ["JAXPARAM_DATA"])
+
+
+def data_path(*parts) -> Path:
+    """Path into ../shared/data; skips the test with a reason when the folder is absent."""
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"test data not found at {p} (../shared/data is absent)")
+    return p
+
+
+@pytest.fixture(scope="session")
+def grid_mesh():
+    return jp.shapes.graph_surface(12)
+
+
+@pytest.fixture(scope="session")
+def disk_mesh():
+    return jp.shapes.disk(5, seed=1, height=0.3)
+
+
+@pytest.fixture(scope="session")
+def planar_mesh():
+    return jp.shapes.plane_grid(9, 9, jitter=0.3, seed=3, tilt=True)
+
+
+@pytest.fixture(scope="session")
+def single_triangle():
+    return jp.TriMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))

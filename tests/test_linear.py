@@ -1,0 +1,155 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from jaxparam.errors import MeshError, TopologyError
+from conftest import data_path
+
+
+def similarity_residual(uv, xy):
+    """Max distance between uv and xy after the best similarity (least squares, may reflect)."""
+    A = np.column_stack([uv, np.ones(len(uv))])
+    X, *_ = np.linalg.lstsq(A, xy, rcond=None)
+    # A similarity has X[:2] = s * rotation: check it and return the fit residual.
+    M = X[:2]
+    assert np.allclose(M.T @ M, np.eye(2) * (M.T @ M)[0, 0], atol=1e-8)
+    return np.abs(A @ X - xy).max()
+
+
+@pytest.mark.parametrize("kind", ["shape_preserving", "mean_value", "harmonic"])
+def test_linear_precision(kind):
+    # Eq. (6): a planar mesh with boundary="plane" is reproduced up to a similarity.
+    mesh = jp.shapes.plane_grid(9, 9, jitter=0.3, seed=3, tilt=True)
+    uv = np.asarray(jp.convex_map(mesh, weights=kind, boundary="plane"))
+    flat = np.asarray(jp.boundary.plane(jnp.asarray(mesh.vertices)))   # the plane's own coordinates
+    assert similarity_residual(uv, flat) < 1e-9
+
+
+def test_uniform_has_no_linear_precision():
+    mesh = jp.shapes.plane_grid(9, 9, jitter=0.3, seed=3, tilt=True)
+    uv = np.asarray(jp.convex_map(mesh, weights="uniform", boundary="plane"))
+    flat = np.asarray(jp.boundary.plane(jnp.asarray(mesh.vertices)))
+    A = np.column_stack([uv, np.ones(len(uv))])
+    X, *_ = np.linalg.lstsq(A, flat, rcond=None)
+    assert np.abs(A @ X - flat).max() > 1e-3
+
+
+@pytest.mark.parametrize("kind", jp.weights.KINDS)
+@pytest.mark.parametrize("boundary", ["circle", "square"])
+def test_convex_map_one_to_one(grid_mesh, kind, boundary):
+    uv = jp.convex_map(grid_mesh, weights=kind, boundary=boundary)
+    rep = jp.distortion(grid_mesh, uv, weights=kind)
+    if kind != "harmonic":
+        assert rep.theorem1.positive_weights and rep.theorem1.convex_boundary
+    if rep.theorem1.holds:
+        assert rep.flips == 0
+    if boundary == "circle":
+        assert rep.flips == 0
+
+
+def test_theorem1_catches_dividing_edge_on_square_side(grid_mesh):
+    # The grid's corner triangles have a dividing edge whose ends land on one side of the square.
+    uv = jp.convex_map(grid_mesh, weights="uniform", boundary="square")
+    rep = jp.distortion(grid_mesh, uv, weights="uniform")
+    assert not rep.theorem1.dividing_edges_ok and not rep.theorem1.holds
+    assert rep.flips >= 1 or rep.degenerate >= 1
+
+
+def test_interior_vertices_are_convex_combinations(grid_mesh):
+    uv = np.asarray(jp.convex_map(grid_mesh, weights="mean_value"))
+    lam = np.asarray(jp.weights.convex_weights(grid_mesh, "mean_value"))
+    R = jp.weights.ring_entries(grid_mesh.topology)
+    recon = np.zeros((R.n_rows, 2))
+    np.add.at(recon, R.row, lam[:, None] * uv[R.nbr])
+    np.testing.assert_allclose(recon, uv[grid_mesh.topology.interior], atol=1e-12)
+
+
+def test_orientation_kept(disk_mesh):
+    uv = jp.convex_map(disk_mesh)
+    assert np.all(np.asarray(jp.geometry.signed_areas(uv, disk_mesh.faces)) > 0)
+
+
+def test_least_squares_map_matches_weights(grid_mesh):
+    E = grid_mesh.topology.edges
+    V = np.asarray(grid_mesh.vertices)
+    mu = 1.0 / np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    uv1 = np.asarray(jp.least_squares_map(grid_mesh, mu=mu))
+    uv2 = np.asarray(jp.convex_map(grid_mesh, weights="inverse_distance"))
+    np.testing.assert_allclose(uv1, uv2, atol=1e-12)
+    with pytest.raises(MeshError, match=r"mu must be positive.*edges"):
+        jp.least_squares_map(grid_mesh, mu=-mu)
+
+
+def test_gradient_through_convex_map_finite_differences(disk_mesh):
+    V0 = np.asarray(disk_mesh.vertices)
+    F = disk_mesh.faces
+    rng = np.random.default_rng(0)
+    c = rng.standard_normal((disk_mesh.n_vertices, 2))
+
+    def loss(V, kind):
+        uv = jp.convex_map(jp.TriMesh(V, F), weights=kind)
+        return jnp.sum(c * uv)
+
+    d = rng.standard_normal(V0.shape)
+    h = 1e-6
+    for kind in ["shape_preserving", "harmonic", "mean_value"]:
+        g = np.asarray(jax.grad(loss)(jnp.asarray(V0), kind))
+        fd = (loss(jnp.asarray(V0 + h * d), kind) - loss(jnp.asarray(V0 - h * d), kind)) / (2 * h)
+        assert abs(np.sum(g * d) - fd) <= 1e-6 * max(1.0, abs(fd)), kind
+
+
+def test_gradient_wrt_boundary_uvs(grid_mesh):
+    loop = grid_mesh.topology.boundary_loops[0]
+    b0 = np.asarray(jp.boundary.circle(jnp.asarray(grid_mesh.vertices)[loop]))
+    c = np.random.default_rng(1).standard_normal((grid_mesh.n_vertices, 2))
+
+    def loss(b):
+        return jnp.sum(c * jp.convex_map(grid_mesh, weights="mean_value", boundary=b))
+
+    g = np.asarray(jax.grad(loss)(jnp.asarray(b0)))
+    d = np.random.default_rng(2).standard_normal(b0.shape)
+    h = 1e-6
+    fd = (loss(jnp.asarray(b0 + h * d)) - loss(jnp.asarray(b0 - h * d))) / (2 * h)
+    assert abs(np.sum(g * d) - fd) <= 1e-6 * max(1.0, abs(fd))
+
+
+def test_closed_mesh_error():
+    with pytest.raises(TopologyError, match="closed.*manifold_map"):
+        jp.convex_map(jp.shapes.sphere(1))
+
+
+def test_components_error():
+    a = jp.shapes.plane_grid(4, 4)
+    V = np.vstack([np.asarray(a.vertices), np.asarray(a.vertices) + 5])
+    F = np.vstack([a.faces, a.faces + 16])
+    with pytest.raises(TopologyError, match=r"2 connected components"):
+        jp.convex_map(jp.TriMesh(V, F))
+
+
+def test_holes_filled_virtually():
+    mesh = jp.shapes.plane_grid(9, 9, jitter=0.2, seed=1)
+    F = mesh.faces[~np.any(mesh.faces == 40, axis=1)]
+    holed = jp.TriMesh(mesh.vertices, F)
+    uv = jp.convex_map(holed, weights="mean_value")
+    assert jp.distortion(holed, uv).flips == 0
+    assert np.all(np.isfinite(np.asarray(uv)[holed.topology.referenced]))
+
+
+def test_unreferenced_vertices_are_nan(grid_mesh):
+    V = np.vstack([np.asarray(grid_mesh.vertices), [[9.0, 9, 9]]])
+    mesh = jp.TriMesh(V, grid_mesh.faces)
+    uv = np.asarray(jp.convex_map(mesh))
+    assert np.isnan(uv[-1]).all() and np.isfinite(uv[:-1]).all()
+    assert jp.distortion(mesh, uv).unreferenced_vertices == 1
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name", ["camel_b.obj", "bump-domain.obj", "lilium.obj", "snail.obj",
+                                  "grid.off", "planexy.off", "camelhead.off", "halftunnel.off"])
+def test_no_flips_on_shared_disk_meshes(name):
+    mesh = jp.load(data_path("meshes", name))
+    for kind in ["shape_preserving", "mean_value", "uniform"]:
+        uv = jp.convex_map(mesh, weights=kind)
+        assert jp.distortion(mesh, uv).flips == 0, (name, kind)

@@ -1,0 +1,28 @@
+"""Run the short notebook (code cells in order) so the documentation stays true."""
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+NB = Path(__file__).resolve().parents[1] / "notebooks"
+
+
+def run_notebook(path: Path, workdir: Path) -> dict:
+    cells = json.loads(path.read_text())["cells"]
+    ns: dict = {}
+    cwd = os.getcwd()
+    os.chdir(workdir)
+    try:
+        for cell in cells:
+            if cell["cell_type"] == "code":
+                exec(compile("".join(cell["source"]), f"{path.name}", "exec"), ns)
+    finally:
+        os.chdir(cwd)
+    return ns
+
+
+def test_notebook_01_runs(tmp_path):
+    ns = run_notebook(NB / "01_convex_combination_maps.ipynb", tmp_path)
+    assert (tmp_path / "out" / "nb01_uv.png").stat().st_size > 1000
+    assert float(ns["g"].__abs__().max()) > 0

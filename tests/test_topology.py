@@ -1,0 +1,114 @@
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from jaxparam import topology as T
+from jaxparam.errors import DegenerateFaceError, MeshError, NonManifoldError
+
+
+def ring(t, v):
+    return t.ring_idx[t.ring_ptr[v]:t.ring_ptr[v + 1]].tolist()
+
+
+def test_single_triangle_loop_and_rings():
+    t = T.build(np.array([[0, 1, 2]]))
+    assert [l.tolist() for l in t.boundary_loops] == [[0, 1, 2]]
+    assert ring(t, 0) == [1, 2]
+    assert t.euler == 1 and t.genus == 0 and t.n_components == 1
+
+
+def test_fan_ring_is_anticlockwise():
+    # Vertex 0 at the centre of a hexagon fan.
+    k = 6
+    F = np.array([[0, 1 + i, 1 + (i + 1) % k] for i in range(k)])
+    t = T.build(F)
+    r = ring(t, 0)
+    start = r.index(1)
+    assert r[start:] + r[:start] == [1, 2, 3, 4, 5, 6]
+    assert t.interior.tolist() == [0]
+    assert t.boundary_loops[0].tolist() == [1, 2, 3, 4, 5, 6]
+    # Boundary vertex 1: from the neighbour across its outgoing boundary edge to the incoming one.
+    assert ring(t, 1) == [2, 0, 6]
+
+
+def test_grid_counts(grid_mesh):
+    t = grid_mesh.topology
+    n = 12
+    assert t.n_vertices == n * n
+    assert len(t.boundary_loops) == 1 and len(t.boundary_loops[0]) == 4 * (n - 1)
+    assert t.euler == 1 and t.genus == 0
+    # Every interior vertex's ring closes: consecutive neighbours share a face with it.
+    faces = {tuple(sorted(f)) for f in t.faces.tolist()}
+    for v in t.interior[:20]:
+        r = ring(t, v)
+        for a, b in zip(r, r[1:] + r[:1]):
+            assert tuple(sorted((v, a, b))) in faces
+
+
+def test_boundary_loop_follows_face_orientation(grid_mesh):
+    t = grid_mesh.topology
+    loop = t.boundary_loops[0]
+    directed = {(a, b) for f in t.faces.tolist() for a, b in zip(f, f[1:] + f[:1])}
+    for a, b in zip(loop, np.roll(loop, -1)):
+        assert (int(a), int(b)) in directed
+
+
+def test_closed_and_torus_genus():
+    assert jp.shapes.sphere(1).topology.genus == 0
+    assert jp.shapes.sphere(1).topology.is_closed
+    assert jp.shapes.torus().topology.genus == 1
+
+
+def test_dividing_edges():
+    # Two triangles sharing edge (0, 2); all vertices on the boundary, so (0, 2) divides.
+    t = T.build(np.array([[0, 1, 2], [0, 2, 3]]))
+    assert t.dividing_edges.tolist() == [[0, 2]]
+
+
+def test_components_and_unreferenced():
+    F = np.array([[0, 1, 2], [3, 4, 5]])
+    t = T.build(F, 7)
+    assert t.n_components == 2
+    assert t.referenced.tolist() == [True] * 6 + [False]
+
+
+def test_non_manifold_edge_error():
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    with pytest.raises(NonManifoldError, match=r"edges \(0, 1\)"):
+        T.build(F)
+
+
+def test_inconsistent_orientation_error():
+    F = np.array([[0, 1, 2], [0, 1, 3]])
+    with pytest.raises(NonManifoldError, match=r"same direction.*inconsistent"):
+        T.build(F)
+
+
+def test_bowtie_vertex_error():
+    F = np.array([[0, 1, 2], [0, 3, 4]])
+    with pytest.raises(NonManifoldError, match=r"vertices 0 .*bowtie"):
+        T.build(F)
+
+
+def test_index_errors():
+    with pytest.raises(MeshError, match=r"faces 1 .*outside \[0, 3\)"):
+        T.check_faces(np.array([[0, 1, 2], [0, 1, 5]]), 3)
+    with pytest.raises(MeshError, match=r"outside"):
+        T.check_faces(np.array([[0, -1, 2]]), 3)
+    with pytest.raises(DegenerateFaceError, match=r"faces 0 .*repeat a vertex"):
+        T.check_faces(np.array([[0, 0, 2]]), 3)
+    with pytest.raises(MeshError, match=r"shape \(m, 3\)"):
+        T.check_faces(np.array([[0, 1, 2, 3]]), 4)
+    with pytest.raises(MeshError, match=r"no faces"):
+        T.check_faces(np.zeros((0, 3), int), 4)
+
+
+def test_hole_loops_longest_first():
+    mesh = jp.shapes.plane_grid(7, 7)
+    # Remove the faces around the centre vertex to make a hole.
+    F = mesh.faces
+    keep = ~np.any(F == 24, axis=1)
+    t = T.build(F[keep], 49)
+    assert len(t.boundary_loops) == 2
+    assert len(t.boundary_loops[0]) == 24 and len(t.boundary_loops[1]) in (6, 8)
+    assert t.genus == 0
