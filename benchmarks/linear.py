@@ -60,12 +60,12 @@ def run_one(method: str, refine: int) -> dict:
         if method == "igl_lscm":
             b = np.array([bnd[0], bnd[len(bnd) // 2]])
             res = igl.lscm(V, F, b, bc[[0, len(bnd) // 2]])
-            uv = res[-1] if isinstance(res, tuple) else res
+            uv = res[0] if isinstance(res, tuple) else res
         elif method == "igl_uniform":
-            L = -igl.adjacency_matrix(F).astype(float)
             import scipy.sparse as sp
-            L = L - sp.diags(np.asarray(L.sum(1)).ravel())
-            uv = igl.harmonic(L, sp.identity(V.shape[0], format="csc"), bnd, bc, 1)
+            Adj = igl.adjacency_matrix(F).astype(float)
+            L = (sp.diags(np.asarray(Adj.sum(1)).ravel()) - Adj).tocsc()
+            uv = igl.min_quad_with_fixed(L, np.zeros((V.shape[0], 2)), bnd, bc, pd=True)
         else:
             uv = igl.harmonic(V, F, bnd, bc, 1)
         out["total"] = time.perf_counter() - t

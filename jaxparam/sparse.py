@@ -58,6 +58,7 @@ class Pattern:
             raise ValueError(f"Pattern: indptr must have shape ({self.n + 1},) and end at nnz "
                              f"({self.nnz}), got shape {self.indptr.shape} ending at {self.indptr[-1]}.")
         self._rows = None
+        self.uid = _register(self)
         if self.nnz and (self.indices.min() < 0 or self.indices.max() >= self.n):
             raise ValueError(f"Pattern: column indices must lie in [0, {self.n}).")
         # 32-bit, 1-based copies for PARDISO, made once.
@@ -361,7 +362,10 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
     **Returns:** ``x`` with the shape of ``rhs``.
 
     The factorization happens on the host (``jax.pure_callback``) and is
-    cached, so the backward pass (one solve with ``A^T``) does not factorize again.
+    cached, so the backward pass (one solve with ``A^T``) does not factorize
+    again.  The pattern travels as operands (its id and index arrays), so the
+    compiled code depends on the sizes only and is shared by every mesh of
+    the same size.
 
     Example::
 
@@ -375,40 +379,59 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
     if rhs.ndim not in (1, 2) or rhs.shape[0] != pattern.n:
         raise SolverError(f"sparse.solve: rhs must have shape ({pattern.n},) or ({pattern.n}, k), "
                           f"got {tuple(rhs.shape)}.", stage="solve")
-    return _solve(pattern, symmetric, backend, values, rhs)
+    return _solve_jit(values, rhs, pattern.rows, pattern.indices, np.int64(pattern.uid),
+                      symmetric=symmetric, backend=backend)
 
 
-def _host_solve(pattern, symmetric, backend, transpose, values, b):
+#: Live patterns by id, so host callbacks can find a pattern from a traced integer.
+_registry: "weakref.WeakValueDictionary[int, Pattern]" = weakref.WeakValueDictionary()
+_next_uid = [0]
+
+
+def _register(pattern: Pattern) -> int:
+    _next_uid[0] += 1
+    _registry[_next_uid[0]] = pattern
+    return _next_uid[0]
+
+
+def _host_solve(symmetric, backend, transpose, values, b, uid):
+    pattern = _registry.get(int(uid))
+    if pattern is None:
+        raise SolverError("sparse: the matrix pattern was garbage-collected during a solve.", stage="solve")
     fac = _cached_factorization(pattern, np.asarray(values), symmetric, backend)
     b = np.asarray(b)
     return (fac.solve_transpose(b) if transpose else fac.solve(b)).astype(np.float64).reshape(b.shape)
 
 
-def _callback(pattern, symmetric, backend, transpose, values, b):
+def _callback(symmetric, backend, transpose, values, b, uid):
     return jax.pure_callback(
-        functools.partial(_host_solve, pattern, symmetric, backend, transpose),
-        jax.ShapeDtypeStruct(b.shape, jnp.float64), values, b, vmap_method="sequential")
+        functools.partial(_host_solve, symmetric, backend, transpose),
+        jax.ShapeDtypeStruct(b.shape, jnp.float64), values, b, uid, vmap_method="sequential")
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
-def _solve(pattern, symmetric, backend, values, rhs):
-    return _callback(pattern, symmetric, backend, False, values, rhs)
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
+def _solve_core(symmetric, backend, values, rhs, rows, cols, uid):
+    return _callback(symmetric, backend, False, values, rhs, uid)
 
 
-def _solve_fwd(pattern, symmetric, backend, values, rhs):
-    x = _callback(pattern, symmetric, backend, False, values, rhs)
-    return x, (values, x)
+def _solve_fwd(symmetric, backend, values, rhs, rows, cols, uid):
+    x = _callback(symmetric, backend, False, values, rhs, uid)
+    return x, (values, x, rows, cols, uid)
 
 
-def _solve_bwd(pattern, symmetric, backend, res, g):
-    values, x = res
-    lam = _callback(pattern, symmetric, backend, not symmetric, values, g)
-    rows, cols = pattern.rows, pattern.indices
+def _solve_bwd(symmetric, backend, res, g):
+    values, x, rows, cols, uid = res
+    lam = _callback(symmetric, backend, not symmetric, values, g, uid)
     if x.ndim == 1:
         dvals = -lam[rows] * x[cols]
     else:
         dvals = -jnp.sum(lam[rows] * x[cols], axis=1)
-    return dvals, lam
+    return dvals, lam, None, None, None
 
 
-_solve.defvjp(_solve_fwd, _solve_bwd)
+_solve_core.defvjp(_solve_fwd, _solve_bwd)
+
+
+@functools.partial(jax.jit, static_argnames=("symmetric", "backend"))
+def _solve_jit(values, rhs, rows, cols, uid, *, symmetric, backend):
+    return _solve_core(symmetric, backend, values, rhs, rows, cols, uid)
