@@ -1,9 +1,10 @@
 """Combinatorics of a triangle mesh, computed once from the (concrete) face array.
 
 Everything here is numpy and vectorized: no Python loop runs over vertices or
-faces.  The central tool is :func:`_rank_linked_lists`, which orders the
-successor lists that a manifold mesh defines (the wedges around a vertex, the
-edges of a boundary loop) by pointer jumping in ``O(len * log(max length))``.
+faces.  One sort of the half-edges by undirected edge pairs every half-edge
+with its twin; the wedges around all vertices are then ordered by walking
+every fan at once (:func:`_walk_fans`), and boundary loops by pointer jumping
+(:func:`_rank_linked_lists`).
 
 Conventions: faces are counter-clockwise; a boundary loop runs along the
 faces' orientation (interior on its left); a one-ring lists a vertex's
@@ -111,23 +112,8 @@ def _rank_linked_lists(succ: np.ndarray, max_len: int):
     return root, pos, is_cycle
 
 
-def _halfedge_lookup(a: np.ndarray, b: np.ndarray, n: int):
-    """Sorted keys for directed edges ``a -> b``; returns (keys_sorted, order)."""
-    keys = a * np.int64(n) + b
-    order = np.argsort(keys, kind="stable")
-    return keys[order], order
-
-
-def _find(keys_sorted, order, query):
-    """Index of each query key in the original arrays, or -1."""
-    pos = np.searchsorted(keys_sorted, query)
-    pos_c = np.minimum(pos, keys_sorted.size - 1)
-    found = keys_sorted[pos_c] == query
-    return np.where(found, order[pos_c], -1)
-
-
-def _raise_edge_error(a, b, hf, n, keys_sorted, korder, dup, where):
-    """Explain duplicated directed half-edges: a non-manifold edge or inconsistent orientation."""
+def _raise_edge_error(a, b, hf, n, where):
+    """Explain a bad edge: one shared by more than two faces, or two faces running the same way."""
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     uniq, counts = np.unique(lo * np.int64(n) + hi, return_counts=True)
     over = np.flatnonzero(counts > 2)
@@ -137,12 +123,54 @@ def _raise_edge_error(a, b, hf, n, keys_sorted, korder, dup, where):
             f"{where}: edges {first_few(e)} are shared by more than two faces (edge {e[0]} by "
             f"{int(counts[over[0]])} faces); the mesh is non-manifold: split it into manifold "
             "pieces (e.g. trimesh's split) or remove the extra faces.")
-    e = [(int(k // n), int(k % n)) for k in keys_sorted[dup]]
+    keys = a * np.int64(n) + b
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    dup = np.flatnonzero(ks[1:] == ks[:-1])
+    e = [(int(k // n), int(k % n)) for k in ks[dup]]
     raise NonManifoldError(
         f"{where}: edges {first_few(e)} are traversed in the same direction by two faces "
-        f"(edge {e[0]} by faces {int(hf[korder[dup[0]]])} and {int(hf[korder[dup[0] + 1]])}); the "
+        f"(edge {e[0]} by faces {int(hf[order[dup[0]]])} and {int(hf[order[dup[0] + 1]])}); the "
         "faces' orientation is inconsistent (or there are duplicate faces): orient the faces "
         "consistently (e.g. trimesh.repair.fix_winding) and remove duplicates.")
+
+
+def _walk_fans(a: np.ndarray, succ: np.ndarray, n: int):
+    """Order every vertex's wedges by walking all fans at once.
+
+    Each vertex starts at a wedge without predecessor (the first of a
+    boundary vertex's fan) or, for a closed fan, at any wedge; the walks
+    advance together, one wedge per vertex per step, so the work is the
+    number of wedges and the number of steps the largest degree.
+
+    **Returns:** ``pos (H,)`` the wedge's position in its vertex's fan (-1 if
+    a second fan left it unvisited) and ``closed (n,)`` whether the walk came
+    back to its start (an interior vertex).
+    """
+    H = a.size
+    has_pred = np.zeros(H, bool)
+    has_pred[succ[succ >= 0]] = True
+    start = np.full(n, -1, np.int64)
+    start[a] = np.arange(H)
+    heads = np.flatnonzero(~has_pred)
+    start[a[heads]] = heads
+    verts = np.flatnonzero(start >= 0)
+    cur = start[verts]
+    first = cur
+    pos = np.full(H, -1, np.int64)
+    closed = np.zeros(n, bool)
+    step = 0
+    while cur.size:
+        pos[cur] = step
+        nxt = succ[cur]
+        back = nxt == first
+        closed[verts[back]] = True
+        keep = (nxt >= 0) & ~back
+        verts, cur, first = verts[keep], nxt[keep], first[keep]
+        step += 1
+        if step > H:  # a successor structure with a cycle not through the start: never for faces
+            raise MeshError("topology: internal error walking vertex fans")
+    return pos, closed
 
 
 @dataclass(frozen=True, eq=False)
@@ -258,58 +286,57 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     c = F[:, [2, 0, 1]].reshape(-1)
     hf = np.repeat(np.arange(m), 3)
 
-    # One sort of the directed half-edges serves twins, duplicates and wedge successors.
-    keys_sorted, korder = _halfedge_lookup(a, b, n)
-    dup = np.flatnonzero(keys_sorted[1:] == keys_sorted[:-1])
-    if dup.size:
-        _raise_edge_error(a, b, hf, n, keys_sorted, korder, dup, where)
-    twin = _find(keys_sorted, korder, b * np.int64(n) + a)
+    # One sort by undirected edge: a half-edge and its twin end up side by side.
+    H = a.size
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    ukey = lo * np.int64(n) + hi
+    order = np.argsort(ukey, kind="stable")
+    us = ukey[order]
+    same_next = us[1:] == us[:-1]
+    pair = np.flatnonzero(same_next)
+    h1, h2 = order[pair], order[pair + 1]
+    if (pair.size > 1 and np.any(same_next[1:] & same_next[:-1])) or np.any(a[h1] == a[h2]):
+        _raise_edge_error(a, b, hf, n, where)
+    twin = np.full(H, -1, np.int64)
+    twin[h1] = h2
+    twin[h2] = h1
     is_bd_he = twin < 0
 
-    # Undirected edges: each interior edge once (from its a < b side), each boundary half-edge.
-    own = np.flatnonzero((a < b) | is_bd_he)
-    lo, hi = np.minimum(a[own], b[own]), np.maximum(a[own], b[own])
-    eorder = np.argsort(lo * np.int64(n) + hi, kind="stable")
-    own = own[eorder]
-    edges = np.stack([lo[eorder], hi[eorder]], axis=1)
+    # Undirected edges (sorted), and the faces on either side: side 0 where it runs lo -> hi.
+    first = np.ones(us.size, bool)
+    first[1:] = ~same_next
+    edge_of = np.cumsum(first) - 1
+    ukeys = us[first]
+    edges = np.stack([ukeys // n, ukeys % n], axis=1)
     ne = edges.shape[0]
     edge_faces = np.full((ne, 2), -1, np.int64)
-    # Side 0: the face where the edge runs lo -> hi; side 1: hi -> lo.
-    fwd = a[own] < b[own]
-    edge_faces[:, 0] = np.where(fwd, hf[own], np.where(twin[own] >= 0, hf[np.maximum(twin[own], 0)], -1))
-    edge_faces[:, 1] = np.where(fwd, np.where(twin[own] >= 0, hf[np.maximum(twin[own], 0)], -1), hf[own])
+    edge_faces[edge_of, (a[order] > b[order]).astype(np.int64)] = hf[order]
 
     # Wedges around each vertex: wedge w (at a[w], from b[w] to c[w]) is followed by the wedge
     # that starts with the half-edge a[w] -> c[w], the twin of the face's half-edge c[w] -> a[w].
-    prev_he = (np.arange(a.size) // 3) * 3 + (np.arange(a.size) + 2) % 3
-    succ = twin[prev_he]
-    root, pos, is_cycle = _rank_linked_lists(succ, int(np.bincount(a).max()))
-
-    referenced = np.zeros(n, bool)
-    referenced[a] = True
-    # Fans per vertex: one head per fan. A manifold vertex has exactly one.
-    is_head = root == np.arange(a.size)
-    fans = np.bincount(a[is_head], minlength=n)
-    bow = np.flatnonzero(fans > 1)
+    idx = np.arange(H)
+    succ = twin[idx - idx % 3 + (idx + 2) % 3]
+    pos, closed = _walk_fans(a, succ, n)
+    wedge_count = np.bincount(a, minlength=n)
+    covered = np.bincount(a[pos >= 0], minlength=n)
+    referenced = wedge_count > 0
+    bow = np.flatnonzero(covered < wedge_count)
     if bow.size:
         raise NonManifoldError(
             f"{where}: vertices {first_few(bow)} are non-manifold (vertex {int(bow[0])} joins "
-            f"{int(fans[bow[0]])} separate fans of faces, a 'bowtie'); split such vertices "
-            "into one copy per fan.")
+            "several separate fans of faces, a 'bowtie'); split such vertices into one copy per fan.")
     # A vertex is on the boundary when its fan is a path (not a cycle).
-    is_boundary = np.zeros(n, bool)
-    is_boundary[a[~is_cycle]] = True
+    is_boundary = referenced & ~closed
 
     # One-ring CSR: interior vertex: neighbours b of its wedges in fan order;
     # boundary vertex: the same plus c of the last wedge.
-    wedge_count = np.bincount(a, minlength=n)
     deg = wedge_count + is_boundary.astype(np.int64)
     ring_ptr = np.zeros(n + 1, np.int64)
     np.cumsum(deg, out=ring_ptr[1:])
     slot_w = ring_ptr[a] + pos
     ring_idx = np.empty(ring_ptr[-1], np.int64)
     ring_idx[slot_w] = b
-    last = ~is_cycle & (succ < 0)
+    last = succ < 0
     ring_idx[slot_w[last] + 1] = c[last]
     ring_row = np.repeat(np.arange(n), deg)
     # prev/next within each ring (cyclic for interior vertices).
@@ -327,7 +354,7 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     loops = _boundary_loops_from(a[is_bd_he], b[is_bd_he], n)
 
     # Components over the vertex graph of the faces.
-    g = sp.coo_matrix((np.ones(a.size, np.int8), (a, b)), shape=(n, n)).tocsr()
+    g = sp.csr_matrix((np.ones(ne, np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
     _, lab = connected_components(g, directed=False)
     comp = np.full(n, -1, np.int64)
     ref_idx = np.flatnonzero(referenced)
