@@ -189,6 +189,9 @@ class Topology:
     - ``ring_ptr (n+1,)``, ``ring_idx (nnz,)``: anticlockwise one-rings in CSR
     - ``ring_prev (nnz,)``, ``ring_next (nnz,)``: the neighbour before / after
       each entry in its ring (``-1`` past the end of a boundary vertex's fan)
+    - ``ring_row (nnz,)``: the centre vertex of each entry; ``ring_wedge (nnz,)``:
+      the corner ``3 f + c`` of the face whose wedge at the centre starts at
+      this entry (``-1`` for a boundary vertex's last entry)
     - ``is_boundary (n,) bool``, ``referenced (n,) bool``
     - ``interior (ni,)``, ``boundary (nb,)``: vertex indices; ``slot (n,)``:
       position of a vertex in ``interior`` or in ``boundary``
@@ -207,6 +210,7 @@ class Topology:
     ring_prev: np.ndarray
     ring_next: np.ndarray
     ring_row: np.ndarray
+    ring_wedge: np.ndarray
     is_boundary: np.ndarray
     referenced: np.ndarray
     interior: np.ndarray
@@ -339,6 +343,9 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     last = succ < 0
     ring_idx[slot_w[last] + 1] = c[last]
     ring_row = np.repeat(np.arange(n), deg)
+    # The wedge (half-edge index 3 f + corner) that starts at each ring entry; -1 after the last.
+    ring_wedge = np.full(ring_idx.size, -1, np.int64)
+    ring_wedge[slot_w] = np.arange(H)
     # prev/next within each ring (cyclic for interior vertices).
     k = np.arange(ring_idx.size)
     start = ring_ptr[ring_row]
@@ -378,7 +385,7 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     return Topology(
         n_vertices=n, faces=F, edges=edges, edge_faces=edge_faces, boundary_loops=loops,
         ring_ptr=ring_ptr, ring_idx=ring_idx, ring_prev=ring_prev, ring_next=ring_next,
-        ring_row=ring_row, is_boundary=is_boundary, referenced=referenced, interior=interior,
+        ring_row=ring_row, ring_wedge=ring_wedge, is_boundary=is_boundary, referenced=referenced, interior=interior,
         boundary=boundary, slot=slot, components=comp, n_components=n_comp, euler=int(euler),
         genus=int(genus), dividing_edges=dividing)
 

@@ -54,6 +54,8 @@ class RingEntries:
     nbr: np.ndarray
     prev: np.ndarray
     next: np.ndarray
+    wedge: np.ndarray
+    prev_wedge: np.ndarray
     row_start: np.ndarray
     row_end: np.ndarray
     degree: np.ndarray
@@ -71,50 +73,54 @@ def ring_entries(topology) -> RingEntries:
     degree = np.bincount(row, minlength=t.interior.size)
     starts = np.zeros(t.interior.size + 1, np.int64)
     np.cumsum(degree, out=starts[1:])
+    k = np.arange(entry.size)
+    row_start, row_end = starts[row], starts[row + 1]
+    prev_k = np.where(k > row_start, k - 1, row_end - 1)
+    wedge = t.ring_wedge[entry]
     return RingEntries(entry=entry, row=row, center=center, nbr=t.ring_idx[entry],
-                       prev=t.ring_prev[entry], next=t.ring_next[entry],
-                       row_start=starts[row], row_end=starts[row + 1], degree=degree,
-                       n_rows=int(t.interior.size))
+                       prev=t.ring_prev[entry], next=t.ring_next[entry], wedge=wedge,
+                       prev_wedge=wedge[prev_k], row_start=row_start, row_end=row_end,
+                       degree=degree, n_rows=int(t.interior.size))
 
 
-def _angle(a, b):
-    """Angle between vectors ``a, b: (k, 3)``, stable for small and obtuse angles."""
-    cr = jnp.cross(a, b)
-    return jnp.arctan2(safe_norm(cr), jnp.sum(a * b, -1))
+def _corner_geometry(V, F):
+    """Per corner ``3 f + c`` of every face: the angle there, its cotangent, and the length
+    of the half-edge leaving it (corner c -> c + 1).  Computed once per face, so that
+    every one-ring quantity below is a gather (survey §4–5 need only these)."""
+    P = V[F]                                            # (m, 3, 3)
+    e = jnp.roll(P, -1, axis=1) - P                     # half-edge c -> c+1
+    f = jnp.roll(P, 1, axis=1) - P                      # c -> c-1
+    cr = safe_norm(jnp.cross(e, f))
+    dot = jnp.sum(e * f, -1)
+    return (jnp.arctan2(cr, dot).reshape(-1), (dot / cr).reshape(-1),
+            safe_norm(e).reshape(-1))
 
 
-def _cot(a, b):
-    """Cotangent of the angle between ``a`` and ``b``: ``a.b / |a x b|``."""
-    return jnp.sum(a * b, -1) / safe_norm(jnp.cross(a, b))
-
-
-@functools.partial(jax.jit, static_argnames=("kind", "n_rows"))
-def _weights_kernel(V, center, nbr, prev, nxt, row, row_start, row_end, degree, *, kind, n_rows):
-    x = V[center]
-    d = V[nbr] - x
-    r = safe_norm(d)
+@functools.partial(jax.jit, static_argnames=("kind", "n_rows", "max_degree"))
+def _weights_kernel(V, F, wedge, prev_wedge, row, row_start, row_end, degree, *, kind, n_rows,
+                    max_degree):
+    angle, cot, length = _corner_geometry(V, F)
+    r = length[wedge]                                   # |w_j - v|
     if kind == "uniform":
         return jnp.ones_like(r)
     if kind == "inverse_distance":
         return 1.0 / r
     if kind == "harmonic":
-        # mu_vw = (cot alpha + cot beta) / 2, alpha and beta opposite [v, w] (survey §5).
-        pn, pp = V[nxt], V[prev]
-        cot_a = _cot(x - pn, V[nbr] - pn)
-        cot_b = _cot(x - pp, V[nbr] - pp)
-        return 0.5 * (cot_a + cot_b)
-    # Angles at v between consecutive neighbours: delta_j = ang(v_j, v, v_{j+1}).
-    delta = _angle(d, V[nxt] - x)
+        # mu_vw = (cot alpha + cot beta) / 2 with alpha, beta opposite [v, w] (survey §5): in the
+        # wedge's face the opposite corner is c + 2, in the previous wedge's face c + 1.
+        nxt_face = wedge - wedge % 3 + (wedge + 2) % 3
+        prv_face = prev_wedge - prev_wedge % 3 + (prev_wedge + 1) % 3
+        return 0.5 * (cot[nxt_face] + cot[prv_face])
+    delta = angle[wedge]                                # ang(v_j, v, v_{j+1})
     if kind == "mean_value":
         # Floater 2003: lambda_j ~ (tan(delta_{j-1}/2) + tan(delta_j/2)) / |v_j - v|.
-        prev_delta = _angle(V[prev] - x, d)
-        return (jnp.tan(0.5 * prev_delta) + jnp.tan(0.5 * delta)) / r
+        return (jnp.tan(0.5 * angle[prev_wedge]) + jnp.tan(0.5 * delta)) / r
     if kind == "shape_preserving":
-        return _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows)
+        return _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_degree)
     raise ValueError(kind)
 
 
-def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows):
+def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_degree):
     """Floater's shape-preserving weights (survey §4, eq. (7)), all rows at once.
 
     Step 1, the geodesic polar map: neighbour j goes to ``p_j = r_j (cos phi_j,
@@ -129,11 +135,17 @@ def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows):
     excl = cum - delta                                   # global exclusive cumsum
     phi = scale * (excl - excl[row_start])               # per-row exclusive cumsum, phi_0 = 0
     p = r[:, None] * jnp.stack([jnp.cos(phi), jnp.sin(phi)], -1)
-    # Locate the edge opposite each p_k by one global search: rows are separated by 8 > 2 pi.
-    keys = row * 8.0 + phi
-    target = jnp.mod(phi + jnp.pi, 2 * jnp.pi)
-    l = jnp.searchsorted(jax.lax.stop_gradient(keys), jax.lax.stop_gradient(row * 8.0 + target),
-                         side="right") - 1
+    # Locate the edge [p_l, p_{l+1}] opposite each p_k: l is the last neighbour of the row with
+    # phi_l <= phi_k + pi (mod 2 pi); counted within the row, a short loop over the degree.
+    target = jax.lax.stop_gradient(jnp.mod(phi + jnp.pi, 2 * jnp.pi))
+    phi_c = jax.lax.stop_gradient(phi)
+    deg_k = row_end - row_start
+
+    def count(d, c):
+        j = jnp.minimum(row_start + d, row_end - 1)
+        return c + ((d < deg_k) & (phi_c[j] <= target)).astype(c.dtype)
+
+    l = row_start + jax.lax.fori_loop(0, max_degree, count, jnp.zeros_like(row_start)) - 1
     l = jnp.clip(l, row_start, row_end - 1)
     m = jnp.where(l + 1 < row_end, l + 1, row_start)
     pk, pl, pm = p, p[l], p[m]
@@ -145,6 +157,11 @@ def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows):
     tau = jnp.concatenate([ak, al, am]) / jnp.concatenate([tot, tot, tot])
     lam = jax.ops.segment_sum(tau, idx, num_segments=p.shape[0])
     return lam / degree[row]
+
+
+def _bucket(d: int) -> int:
+    """Round a loop bound up to a power of two so similar meshes share compiled code."""
+    return 1 << max(3, (d - 1).bit_length())
 
 
 def entry_weights(vertices, topology, kind: str):
@@ -160,8 +177,9 @@ def entry_weights(vertices, topology, kind: str):
     if R.entry.size == 0:
         raise MeshError("weights: the mesh has no interior vertices; nothing to solve for.")
     V = jnp.asarray(vertices, dtype=jnp.float64)
-    w = _weights_kernel(V, R.center, R.nbr, R.prev, R.next, R.row, R.row_start, R.row_end,
-                        R.degree, kind=kind, n_rows=R.n_rows)
+    w = _weights_kernel(V, topology.faces, R.wedge, R.prev_wedge, R.row, R.row_start, R.row_end,
+                        R.degree, kind=kind, n_rows=R.n_rows,
+                        max_degree=_bucket(int(R.degree.max())) if kind == "shape_preserving" else 0)
     return w, kind in SYMMETRIC_KINDS
 
 
