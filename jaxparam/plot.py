@@ -71,7 +71,7 @@ def plot_uv(mesh, uv, path, *, title: str | None = None, quantity: str = "aspect
     return path
 
 
-def plot_checkerboard(mesh, uv, path, *, squares: int = 12, title: str | None = None,
+def plot_checkerboard(mesh, uv, path, *, squares: int = 8, title: str | None = None,
                       elev: float = 30, azim: float = -60):
     """Render the surface with a checkerboard texture through ``uv`` (faces coloured by
     the checker cell of their UV centroid) and save it as PNG."""
