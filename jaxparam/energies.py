@@ -61,10 +61,18 @@ def _barrier(det, value):
     return jnp.where(det > 0, value, jnp.inf)
 
 
+def _with_J(of_J):
+    """A density ``f(frame, q) = g(J)`` that also carries ``g`` as ``density.of_J``, so the
+    minimizer can take Hessians in the 4 entries of ``J`` instead of the 6 UV coordinates."""
+    def density(frame, q):
+        return of_J(geo.jacobian_from_frame(frame, q))
+    density.of_J = of_J
+    return density
+
+
 def _from_sv(fn, *, barrier=True):
     """Density from a function of the singular values (s1 >= s2 > 0 when unflipped)."""
-    def density(frame, q):
-        J = geo.jacobian_from_frame(frame, q)
+    def of_J(J):
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         s1, s2 = geo.singular_values(J)
         if not barrier:
@@ -72,19 +80,18 @@ def _from_sv(fn, *, barrier=True):
         s2_safe = jnp.where(det > 0, s2, 1.0)
         s1_safe = jnp.where(det > 0, s1, 1.0)
         return _barrier(det, fn(s1_safe, s2_safe))
-    return density
+    return _with_J(of_J)
 
 
 def _from_J(fn, *, barrier=True):
     """Density from a function of the 2x2 Jacobian."""
-    def density(frame, q):
-        J = geo.jacobian_from_frame(frame, q)
+    def of_J(J):
         if not barrier:
             return fn(J)
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         J_safe = jnp.where(det > 0, J, jnp.eye(2))
         return _barrier(det, fn(J_safe))
-    return density
+    return _with_J(of_J)
 
 
 def _angle_density(frame, q):
