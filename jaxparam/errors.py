@@ -81,6 +81,8 @@ def _plain(item):
             return tuple(int(v) if np.issubdtype(item.dtype, np.integer) else float(v) for v in item)
         if isinstance(item, np.generic):
             return item.item()
+        if isinstance(item, tuple):
+            return tuple(_plain(v) for v in item)
     except ImportError:  # pragma: no cover
         pass
     return item

@@ -187,6 +187,14 @@ def _boundary_key(boundary, k: int):
     return "user", uv
 
 
+def _boundary_only(V, loop, user_uv, shape, spacing, corners):
+    if shape == "user":
+        return user_uv
+    if isinstance(shape, tuple):
+        return bmap.polygon(V[loop], np.asarray(shape), spacing=spacing, corner_positions=corners)
+    return bmap.boundary_uv(V[loop], shape, spacing=spacing, corners=corners)
+
+
 def _map_with(mesh: TriMesh, w_of, symmetric: bool, boundary, spacing, corners, backend, where):
     disk_check(mesh, where)
     if spacing not in bmap.SPACINGS:
@@ -197,6 +205,11 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, boundary, spacing, corners, 
     loop = t.boundary_loops[0]
     shape, user_uv = _boundary_key(boundary, loop.size)
     corners = None if corners is None else tuple(int(c) for c in corners)
+    if t.interior.size == 0:
+        # No interior vertex: the map is the boundary map itself.
+        uv_b = _boundary_only(V, loop, user_uv, shape, spacing, corners)
+        uv = jnp.full((t.n_vertices, 2), jnp.nan).at[loop].set(uv_b)
+        return uv[: mesh.n_vertices]
     w = w_of(work)
     S = interior_system(t)
     R = wts.ring_entries(t)
