@@ -22,7 +22,7 @@ import functools
 import hashlib
 import threading
 import weakref
-from collections import OrderedDict
+from collections import OrderedDict, deque
 
 import jax
 import jax.numpy as jnp
@@ -379,6 +379,8 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
     if rhs.ndim not in (1, 2) or rhs.shape[0] != pattern.n:
         raise SolverError(f"sparse.solve: rhs must have shape ({pattern.n},) or ({pattern.n}, k), "
                           f"got {tuple(rhs.shape)}.", stage="solve")
+    # The host callback runs asynchronously: keep the pattern alive until it has.
+    _recent.append(pattern)
     return _solve_jit(values, rhs, pattern.rows, pattern.indices, np.int64(pattern.uid),
                       symmetric=symmetric, backend=backend)
 
@@ -386,6 +388,9 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
 #: Live patterns by id, so host callbacks can find a pattern from a traced integer.
 _registry: "weakref.WeakValueDictionary[int, Pattern]" = weakref.WeakValueDictionary()
 _next_uid = [0]
+#: The patterns of the latest solves, held strongly (a pattern made for one solve may
+#: otherwise be collected before its asynchronous callback runs).
+_recent: "deque[Pattern]" = deque(maxlen=64)
 
 
 def _register(pattern: Pattern) -> int:

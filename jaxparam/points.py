@@ -1,0 +1,508 @@
+"""Unorganized points (survey §8): meshless parameterization, boundary detection, reconstruction.
+
+Pipeline (numpy for the combinatorics, JAX for what depends on coordinates):
+
+1. :func:`knn_graph`: the ``k`` nearest neighbours of every point (cKDTree),
+   made symmetric by default (``w`` is ``v``'s neighbour when either lists the
+   other).  Directed kNN graphs are often singular in practice: a cluster whose
+   neighbours only point at each other never reaches the boundary (the
+   solvability condition at the end of §8).
+2. Tangent planes by PCA of each neighbourhood; neighbours sorted by angle
+   around the point in that plane (a star-shaped fan, so the point lies in the
+   fan's kernel).
+3. :func:`detect_boundary`: a point is a boundary candidate when the largest
+   angular gap between its projected neighbours exceeds ``gap`` (default
+   ``0.6 pi``; interior points of a fair sampling have gaps well below
+   ``pi/2``).  The candidates are ordered into one closed polygon by the
+   longest path of their minimum spanning tree (a loop of points has a nearly
+   path-shaped spanning tree; points on short branches are left interior).
+   The survey leaves this step to [13]; users can pass ``boundary`` indices.
+4. Weights on the fans: ``uniform`` and ``inverse_distance`` (spring weights,
+   symmetric: a Cholesky solve), ``mean_value`` and ``shape_preserving``
+   (Floater's, on the fan of triangles ``(v, w_j, w_{j+1})``, 3D angles and
+   lengths, so that everything is differentiable in the points).
+5. The boundary on a circle or square (chord length), the interior by the same
+   differentiable sparse solve as meshes (:func:`jaxparam.sparse.solve`).
+
+:func:`reconstruct_surface` triangulates the parameter points (Delaunay),
+lifts the triangles to 3D and peels off the hull triangles that bridge
+concave parts of the boundary.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree, shortest_path
+from scipy.spatial import Delaunay, cKDTree
+
+from . import boundary as bmap
+from . import sparse
+from .errors import MeshFileError, PointCloudError, first_few
+from .geometry import safe_norm
+from .mesh import TriMesh
+
+__all__ = ["load_points", "check_points", "knn_graph", "PointGraph", "point_graph",
+           "detect_boundary", "meshless_map", "reconstruct_surface", "WEIGHTS"]
+
+WEIGHTS = ("uniform", "inverse_distance", "shape_preserving", "mean_value")
+
+
+# ------------------------------------------------------------------------------------------
+# Input
+# ------------------------------------------------------------------------------------------
+
+def load_points(path) -> np.ndarray:
+    """Read points: ``.xyz``/``.txt`` (x y z per line), ``.npy``, ``.ply``; ``(N, 3) float``.
+
+    Example::
+
+        P = jp.load_points("camelhead.xyz")
+    """
+    p = Path(path)
+    if not p.exists():
+        raise MeshFileError(f"{path}: no such file.")
+    ext = p.suffix.lower()
+    if ext == ".npy":
+        try:
+            P = np.load(p, allow_pickle=False)
+        except Exception as exc:
+            raise MeshFileError(f"{path}: not a readable .npy array ({exc}).") from None
+    elif ext == ".ply":
+        try:
+            import trimesh
+            P = np.asarray(trimesh.load(str(p), process=False).vertices)
+        except Exception as exc:
+            raise MeshFileError(f"{path}: cannot read the PLY file ({type(exc).__name__}: {exc}).") from None
+    else:
+        rows = []
+        for line_no, raw in enumerate(p.read_text(errors="replace").splitlines(), 1):
+            line = raw.split("#", 1)[0].strip()
+            if not line:
+                continue
+            parts = line.replace(",", " ").split()
+            if len(parts) < 3:
+                raise MeshFileError(f"{path}, line {line_no}: expected 'x y z', got {line!r}.")
+            try:
+                rows.append([float(t) for t in parts[:3]])
+            except ValueError:
+                raise MeshFileError(f"{path}, line {line_no}: cannot read numbers from {line!r}.") from None
+        P = np.asarray(rows, np.float64).reshape(-1, 3)
+    P = np.asarray(P, np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise MeshFileError(f"{path}: expected an (N, 3) array of points, got shape {P.shape}.")
+    return P
+
+
+def check_points(points, *, k: int = 10, merge_duplicates: bool = False):
+    """Validate a point set; returns ``(points (N, 3), kept)`` where ``kept`` maps back.
+
+    Raises :class:`PointCloudError` for a wrong shape, non-finite coordinates,
+    too few points, ``k >= N``, duplicates (unless ``merge_duplicates``: then
+    the later copies are dropped and ``kept`` says which points remain) and
+    point sets that are collinear or coincident.
+    """
+    P = np.asarray(points, np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise PointCloudError(f"meshless_map: points must have shape (N, 3), got {P.shape}.")
+    bad = np.flatnonzero(~np.all(np.isfinite(P), axis=1))
+    if bad.size:
+        raise PointCloudError(f"meshless_map: points {first_few(bad)} have non-finite coordinates; "
+                              "remove them.")
+    kept = np.arange(P.shape[0])
+    _, first, inv = np.unique(P, axis=0, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    dup = np.flatnonzero(first[inv] != np.arange(P.shape[0]))
+    if dup.size:
+        if not merge_duplicates:
+            raise PointCloudError(
+                f"meshless_map: points {first_few(dup)} duplicate earlier points (point {int(dup[0])} "
+                f"equals point {int(first[inv[dup[0]]])}); remove them or pass merge_duplicates=True.")
+        kept = np.sort(first)
+        P = P[kept]
+    if P.shape[0] < 4:
+        raise PointCloudError(f"meshless_map: {P.shape[0]} points are too few; at least 4 are needed.")
+    if k >= P.shape[0]:
+        raise PointCloudError(f"meshless_map: k = {k} neighbours needs more than {k} points, "
+                              f"got {P.shape[0]}; lower k.")
+    s = np.linalg.svd(P - P.mean(0), compute_uv=False)
+    if s[0] == 0 or s[1] <= 1e-9 * s[0]:
+        what = "coincident" if s[0] == 0 else "collinear"
+        raise PointCloudError(f"meshless_map: the points are {what}; a surface needs points "
+                              "spread in two directions.")
+    return P, kept
+
+
+# ------------------------------------------------------------------------------------------
+# Neighbourhoods, fans and boundary
+# ------------------------------------------------------------------------------------------
+
+def knn_graph(points, k: int = 10, *, radius: float | None = None, symmetric: bool = True):
+    """The neighbour graph G of §8 as a CSR ``(indptr (N+1,), indices)``, self excluded.
+
+    ``k`` nearest neighbours (or all within ``radius``); ``symmetric`` adds
+    ``v -> w`` whenever ``w -> v``.
+    """
+    P = np.asarray(points, np.float64)
+    N = P.shape[0]
+    tree = cKDTree(P)
+    if radius is not None:
+        pairs = tree.query_pairs(radius, output_type="ndarray")
+        rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+        cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    else:
+        _, idx = tree.query(P, k + 1, workers=-1)
+        rows = np.repeat(np.arange(N), k)
+        cols = idx[:, 1:].reshape(-1)
+        if symmetric:
+            rows, cols = np.concatenate([rows, cols]), np.concatenate([cols, rows])
+    G = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(N, N))
+    G.sum_duplicates()
+    G.sort_indices()
+    return G.indptr.astype(np.int64), G.indices.astype(np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class PointGraph:
+    """Neighbour fans of a point set (numpy, from concrete points).
+
+    ``indptr, indices``: each point's neighbours sorted anticlockwise around
+    it in its PCA tangent plane; ``gap (N,)`` the largest angular gap (radians);
+    ``normal (N, 3)``; ``spacing (N,)`` the mean distance to the neighbours.
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    gap: np.ndarray
+    normal: np.ndarray
+    spacing: np.ndarray
+
+    @property
+    def rows(self) -> np.ndarray:
+        return np.repeat(np.arange(self.indptr.size - 1), np.diff(self.indptr))
+
+
+def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: bool = True) -> PointGraph:
+    """Neighbours, tangent planes and angularly sorted fans of every point."""
+    P = np.asarray(points, np.float64)
+    N = P.shape[0]
+    indptr, indices = knn_graph(P, k, radius=radius, symmetric=symmetric)
+    rows = np.repeat(np.arange(N), np.diff(indptr))
+    deg = np.diff(indptr)
+    if np.any(deg < 2):
+        lonely = np.flatnonzero(deg < 2)
+        raise PointCloudError(f"meshless_map: points {first_few(lonely)} have fewer than 2 neighbours; "
+                              "increase k or radius.")
+    # PCA normal of each neighbourhood (the point and its neighbours).
+    D = P[indices] - P[rows]
+    C = np.zeros((N, 3, 3))
+    np.add.at(C, rows, D[:, :, None] * D[:, None, :])
+    _, vecs = np.linalg.eigh(C)
+    normal = vecs[:, :, 0]
+    # Orient normals consistently with the global best-fit plane's normal.
+    g = np.linalg.svd(P - P.mean(0), full_matrices=False)[2][2]
+    normal *= np.where(normal @ g < 0, -1.0, 1.0)[:, None]
+    e1 = vecs[:, :, 2]
+    e2 = np.cross(normal, e1)
+    ang = np.arctan2(np.einsum("ij,ij->i", D, e2[rows]), np.einsum("ij,ij->i", D, e1[rows]))
+    order = np.lexsort((ang, rows))
+    indices, ang = indices[order], ang[order]
+    # Largest angular gap per point (including the wrap-around one).
+    nxt = np.arange(indices.size) + 1
+    end = indptr[rows + 1]
+    nxt = np.where(nxt >= end, indptr[rows], nxt)
+    gaps = np.mod(ang[nxt] - ang, 2 * np.pi)
+    gaps = np.where(deg[rows] == 1, 2 * np.pi, gaps)
+    gap = np.zeros(N)
+    np.maximum.at(gap, rows, gaps)
+    spacing = np.bincount(rows, weights=np.linalg.norm(D[order], axis=1), minlength=N) / deg
+    return PointGraph(indptr, indices, gap, normal, spacing)
+
+
+def detect_boundary(points, graph: PointGraph, *, gap: float = 0.6 * np.pi) -> np.ndarray:
+    """Boundary points as one closed polygon (indices in order, anticlockwise about the
+    global normal), from the candidates whose largest angular gap exceeds ``gap``."""
+    P = np.asarray(points, np.float64)
+    cand = np.flatnonzero(graph.gap > gap)
+    if cand.size < 3:
+        raise PointCloudError(f"meshless_map: found {cand.size} boundary points (largest angular gap "
+                              f"> {gap:.2f} rad); the points may sample a closed surface. Pass "
+                              "boundary=indices, or lower gap.")
+    Q = P[cand]
+    kk = min(8, cand.size - 1)
+    dist, idx = cKDTree(Q).query(Q, kk + 1)
+    rows = np.repeat(np.arange(cand.size), kk)
+    W = sp.csr_matrix((dist[:, 1:].reshape(-1) + 1e-300, (rows, idx[:, 1:].reshape(-1))),
+                      shape=(cand.size,) * 2)
+    W = W.maximum(W.T)
+    T = minimum_spanning_tree(W)
+    T = T + T.T
+    # Longest path in the spanning forest's largest tree: two sweeps of shortest paths.
+    d0 = shortest_path(T, directed=False, indices=0)
+    far = np.where(np.isfinite(d0), d0, -1)
+    a = int(np.argmax(far))
+    da, pred = shortest_path(T, directed=False, indices=a, return_predecessors=True)
+    da = np.where(np.isfinite(da), da, -1)
+    b = int(np.argmax(da))
+    path = [b]
+    while path[-1] != a:
+        path.append(int(pred[path[-1]]))
+    loop = cand[np.asarray(path[::-1])]
+    if loop.size < 3:
+        raise PointCloudError("meshless_map: could not order the boundary points into a polygon; "
+                              "pass boundary=indices.")
+    # Anticlockwise about the global normal.
+    g = np.linalg.svd(P - P.mean(0), full_matrices=False)[2]
+    uv = (P[loop] - P[loop].mean(0)) @ g[:2].T
+    area = 0.5 * np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1])
+    return loop if area > 0 else loop[::-1]
+
+
+# ------------------------------------------------------------------------------------------
+# Weights and the solve
+# ------------------------------------------------------------------------------------------
+
+def _angle(a, b):
+    return jnp.arctan2(safe_norm(jnp.cross(a, b)), jnp.sum(a * b, -1))
+
+
+@functools.partial(jax.jit, static_argnames=("kind", "n_rows", "max_degree"))
+def _fan_weights(P, center, nbr, nxt, prev, row, row_start, row_end, degree, *, kind, n_rows,
+                 max_degree):
+    """Weights on the fan entries ``(v, w_j)`` with ``w_{j+1} = nxt``, ``w_{j-1} = prev``."""
+    from .weights import _shape_preserving
+
+    x = P[center]
+    d = P[nbr] - x
+    r = safe_norm(d)
+    if kind == "uniform":
+        return jnp.ones_like(r)
+    if kind == "inverse_distance":
+        return 1.0 / r
+    delta = _angle(d, P[nxt] - x)
+    if kind == "mean_value":
+        return (jnp.tan(0.5 * _angle(P[prev] - x, d)) + jnp.tan(0.5 * delta)) / r
+    return _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_degree)
+
+
+@dataclass(frozen=True, eq=False)
+class _System:
+    pattern: sparse.Pattern
+    rows_e: np.ndarray
+    center: np.ndarray
+    nbr: np.ndarray
+    nxt: np.ndarray
+    prev: np.ndarray
+    row_start: np.ndarray
+    row_end: np.ndarray
+    degree: np.ndarray
+    diag_pos: np.ndarray
+    off_pos: np.ndarray
+    ii: np.ndarray
+    ib: np.ndarray
+    ib_slot: np.ndarray
+    interior: np.ndarray
+    n_rows: int
+
+
+def _system(graph: PointGraph, boundary: np.ndarray, N: int) -> _System:
+    is_b = np.zeros(N, bool)
+    is_b[boundary] = True
+    interior = np.flatnonzero(~is_b)
+    slot = np.full(N, -1, np.int64)
+    slot[interior] = np.arange(interior.size)
+    bslot = np.full(N, -1, np.int64)
+    bslot[boundary] = np.arange(boundary.size)
+    rows_all = graph.rows
+    keep = ~is_b[rows_all]
+    ent = np.flatnonzero(keep)
+    center = rows_all[ent]
+    nbr = graph.indices[ent]
+    k = np.arange(graph.indices.size)
+    start_all = graph.indptr[rows_all]
+    end_all = graph.indptr[rows_all + 1]
+    nxt_all = np.where(k + 1 >= end_all, start_all, k + 1)
+    prv_all = np.where(k - 1 < start_all, end_all - 1, k - 1)
+    nxt = graph.indices[nxt_all[ent]]
+    prev = graph.indices[prv_all[ent]]
+    row = slot[center]
+    degree = np.bincount(row, minlength=interior.size)
+    starts = np.zeros(interior.size + 1, np.int64)
+    np.cumsum(degree, out=starts[1:])
+    ii = np.flatnonzero(~is_b[nbr])
+    ib = np.flatnonzero(is_b[nbr])
+    r = np.concatenate([np.arange(interior.size), row[ii]])
+    c = np.concatenate([np.arange(interior.size), slot[nbr[ii]]])
+    ids = np.arange(1, r.size + 1, dtype=np.float64)
+    M = sp.csr_matrix((ids, (r, c)), shape=(interior.size,) * 2)
+    M.sort_indices()
+    pos = np.empty(r.size, np.int64)
+    pos[M.data.astype(np.int64) - 1] = np.arange(r.size)
+    return _System(sparse.Pattern(M.indptr, M.indices, interior.size), row, center, nbr, nxt, prev,
+                   starts[row], starts[row + 1], degree, pos[:interior.size], pos[interior.size:],
+                   ii, ib, bslot[nbr[ib]], interior, int(interior.size))
+
+
+def _check_solvable(S: _System, N: int, boundary: np.ndarray) -> None:
+    """Every interior point must reach a boundary point along G (end of §8)."""
+    src = S.interior[S.rows_e]
+    G = sp.csr_matrix((np.ones(src.size), (S.nbr, src)), shape=(N + 1, N + 1))   # reversed edges
+    G = G + sp.csr_matrix((np.ones(boundary.size), (np.full(boundary.size, N), boundary)),
+                          shape=(N + 1, N + 1))
+    reached = breadth_first_order(G, N, directed=True, return_predecessors=False)
+    ok = np.zeros(N + 1, bool)
+    ok[reached] = True
+    bad = S.interior[~ok[S.interior]]
+    if bad.size:
+        raise PointCloudError(
+            f"meshless_map: {bad.size} points cannot reach the boundary through their neighbours "
+            f"(e.g. point {int(bad[0])}); the system (3) would be singular: increase k, use "
+            "symmetric neighbourhoods, or remove the isolated cluster.")
+
+
+def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boundary="circle",
+                 spacing: str = "chord", boundary_indices=None, radius: float | None = None,
+                 symmetric: bool = True, gap: float = 0.6 * np.pi, graph: PointGraph | None = None,
+                 merge_duplicates: bool = False):
+    """Meshless parameterization of unorganized points (survey §8).
+
+    **Arguments:** ``points: (N, 3)`` (numpy, JAX or a tracer with ``graph`` given);
+    ``k`` neighbours (or ``radius``); ``weights`` one of :data:`WEIGHTS`;
+    ``boundary`` ``"circle"`` or ``"square"``; ``boundary_indices`` the ordered
+    boundary points (default: detected); ``graph`` a precomputed
+    :func:`point_graph` (needed under ``jax.grad``: neighbourhoods are topology,
+    computed from concrete points).
+
+    **Returns:** ``(uv (N, 2), boundary (b,) int)``.
+
+    Differentiable in the points: ``jax.grad`` flows through the weights,
+    the boundary map and the sparse solve.
+
+    Example::
+
+        uv, bnd = jp.meshless_map(points, k=10, weights="inverse_distance")
+    """
+    if weights not in WEIGHTS:
+        raise PointCloudError(f"meshless_map: unknown weights {weights!r}; use one of {WEIGHTS}.")
+    traced = isinstance(points, jax.core.Tracer)
+    if traced:
+        if graph is None or boundary_indices is None:
+            raise PointCloudError("meshless_map: under jax.grad/jit pass graph=jp.points.point_graph("
+                                  "concrete_points) and boundary_indices=... computed from concrete points.")
+        N = points.shape[0]
+        P = points
+    else:
+        Pc, kept = check_points(points, k=k, merge_duplicates=merge_duplicates)
+        if kept.size != np.asarray(points).shape[0]:
+            uv, bnd = meshless_map(Pc, k=k, weights=weights, boundary=boundary, spacing=spacing,
+                                   radius=radius, symmetric=symmetric, gap=gap)
+            return uv, kept[bnd]
+        N = Pc.shape[0]
+        P = points if isinstance(points, jax.Array) else Pc
+        if graph is None:
+            graph = point_graph(Pc, k, radius=radius, symmetric=symmetric)
+    if boundary_indices is None:
+        bnd = detect_boundary(np.asarray(P), graph, gap=gap)
+    else:
+        bnd = np.asarray(boundary_indices, np.int64)
+        if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= N or np.unique(bnd).size != bnd.size:
+            raise PointCloudError(f"meshless_map: boundary_indices must be >= 3 distinct point indices "
+                                  f"in [0, {N}), in order; got {bnd.size} values.")
+    S = _system(graph, bnd, N)
+    _check_solvable(S, N, bnd)
+    Pj = jnp.asarray(P, dtype=jnp.float64)
+    max_deg = 1 << max(3, (int(S.degree.max()) - 1).bit_length())
+    w = _fan_weights(Pj, S.center, S.nbr, S.nxt, S.prev, S.rows_e, S.row_start, S.row_end, S.degree,
+                     kind=weights, n_rows=S.n_rows, max_degree=max_deg)
+    uv_b = bmap.boundary_uv(Pj[bnd], boundary, spacing=spacing)
+    from .linear import _assemble_jit
+
+    vals, rhs = _assemble_jit(w, uv_b, S.rows_e, S.ii, S.ib, S.ib_slot, S.rows_e[S.ib], S.diag_pos,
+                              S.off_pos, ni=S.n_rows, nnz=S.pattern.nnz)
+    sym = weights in ("uniform", "inverse_distance") and symmetric and radius is None
+    x = sparse.solve(S.pattern, vals, rhs, symmetric=sym)
+    uv = jnp.zeros((N, 2)).at[S.interior].set(x).at[bnd].set(uv_b)
+    return uv, bnd
+
+
+# ------------------------------------------------------------------------------------------
+# Reconstruction
+# ------------------------------------------------------------------------------------------
+
+def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> TriMesh:
+    """Triangulate unorganized points through their meshless parameterization (§8).
+
+    Delaunay triangulation of the parameter points, lifted to 3D; triangles on
+    the outside whose longest 3D edge exceeds ``bridge_factor`` times the local
+    point spacing (they bridge concave parts of the boundary) are peeled off
+    repeatedly, and the largest manifold disk is kept.
+
+    **Returns:** a :class:`TriMesh` over all input points (in their order;
+    unused points are unreferenced) with ``.uv``, ``.boundary_points``.
+
+    Example::
+
+        rec = jp.reconstruct_surface(points)
+        rec.uv, rec.faces
+    """
+    P, kept = check_points(points, k=options.get("k", 10), merge_duplicates=options.pop("merge_duplicates", False))
+    graph = point_graph(P, options.get("k", 10), radius=options.get("radius"),
+                        symmetric=options.get("symmetric", True))
+    uv, bnd = meshless_map(P, graph=graph, **options)
+    U = np.asarray(uv)
+    F = Delaunay(U).simplices.astype(np.int64)
+    a, b = U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]]
+    neg = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] < 0
+    F[neg] = F[neg][:, [0, 2, 1]]
+    F = F[np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0]
+    L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    local = graph.spacing[F].mean(1)
+    too_long = L.max(1) > bridge_factor * local
+    keep = np.ones(len(F), bool)
+    while True:
+        sub = F[keep]
+        e = np.sort(np.concatenate([sub[:, [0, 1]], sub[:, [1, 2]], sub[:, [2, 0]]]), axis=1)
+        key = e[:, 0] * np.int64(len(P)) + e[:, 1]
+        uniq, cnt = np.unique(key, return_counts=True)
+        on_bd = np.isin(key, uniq[cnt == 1]).reshape(3, -1).any(0)
+        drop = np.flatnonzero(keep)[on_bd & too_long[keep]]
+        if drop.size == 0:
+            break
+        keep[drop] = False
+    F = _largest_manifold_disk(F[keep], len(P))
+    n_in = np.asarray(points).shape[0]
+    V = np.asarray(points, np.float64) if kept.size == n_in else P
+    mesh = TriMesh(V if kept.size == n_in else P, F, uv=U, validate=False, name="reconstruction")
+    mesh.boundary_points = bnd
+    return mesh
+
+
+def _largest_manifold_disk(F: np.ndarray, n: int) -> np.ndarray:
+    """Make a subset of a planar triangulation a manifold disk: drop the faces at vertices
+    where the boundary touches itself (more than two boundary edges: a bowtie left by the
+    peeling), then keep the largest edge-connected component."""
+    from . import topology as topo
+
+    for _ in range(50):
+        e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        key = e[:, 0] * np.int64(n) + e[:, 1]
+        uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+        bd = e[cnt[inv] == 1]
+        touches = np.bincount(bd.reshape(-1), minlength=n)
+        bad = np.flatnonzero(touches > 2)
+        if bad.size:
+            F = F[~np.isin(F, bad).any(1)]
+            continue
+        t = topo.build(F, n, where="reconstruct_surface")
+        if t.n_components > 1:
+            big = int(np.argmax(np.bincount(t.components[t.components >= 0])))
+            F = F[t.components[F[:, 0]] == big]
+            continue
+        return F
+    raise PointCloudError("reconstruct_surface: could not extract a manifold disk from the "
+                          "triangulation; try a larger k or bridge_factor.")
