@@ -17,7 +17,7 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import errors, tol, topology, geometry, boundary, weights, sparse  # noqa: E402
-from . import linear, metrics, shapes, energies, optimize, points  # noqa: E402
+from . import linear, metrics, shapes, energies, optimize, points, fitting  # noqa: E402
 from .errors import (  # noqa: E402
     DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
     PointCloudError, SolverError, TopologyError,
@@ -28,6 +28,7 @@ from .metrics import DistortionReport, distortion  # noqa: E402
 from .energies import ENERGIES, Energy, energy  # noqa: E402
 from .optimize import MinimizeResult, minimize  # noqa: E402
 from .points import load_points, meshless_map, reconstruct_surface  # noqa: E402
+from .fitting import fit_surface  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -38,4 +39,5 @@ __all__ = [
     "errors", "tol", "topology", "geometry", "boundary", "weights", "sparse", "linear",
     "metrics", "shapes", "energies", "optimize", "energy", "Energy", "ENERGIES", "minimize",
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
+    "fitting", "fit_surface",
 ]

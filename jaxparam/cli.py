@@ -153,6 +153,77 @@ def cmd_flatten(args) -> int:
     return EXIT_OK
 
 
+def cmd_meshless(args) -> int:
+    import numpy as np
+
+    from .mesh import save
+    from .points import load_points, reconstruct_surface
+
+    _enable_compile_cache()
+    seconds = {}
+    t = time.perf_counter()
+    P = load_points(args.points)
+    seconds["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    rec = reconstruct_surface(P, k=args.k, weights=_py(args.weights), boundary=args.boundary)
+    seconds["meshless_map_and_reconstruction"] = time.perf_counter() - t
+    save(args.output, rec, np.nan_to_num(np.asarray(rec.uv)))
+    used = int(rec.topology.referenced.sum())
+    rep = report_dict(rec, rec.uv, seconds=seconds, extra={
+        "points": int(P.shape[0]), "points_used": used, "boundary_points": int(rec.boundary_points.size),
+        "k": args.k, "weights": args.weights})
+    if args.report:
+        write_json(args.report, rep)
+    if args.plot:
+        from .plot import plot_uv
+
+        plot_uv(rec, np.nan_to_num(np.asarray(rec.uv)), args.plot)
+    print(f"{args.output}: {P.shape[0]} points, {used} used, {rec.n_faces} faces, {rep['flips']} flipped")
+    return EXIT_OK
+
+
+def cmd_fit(args) -> int:
+    from .errors import MeshFileError
+    from .fitting import fit_surface
+    from .mesh import load, save
+
+    t = time.perf_counter()
+    mesh = load(args.mesh)
+    if mesh.uv is None:
+        raise MeshFileError(f"{args.mesh}: the mesh has no per-vertex texture coordinates (vt); "
+                            "flatten it first: jaxparam flatten MESH -o MESH_WITH_UV.obj")
+    surf = fit_surface(mesh, mesh.uv, kind=_py(args.surface))
+    out = surf.sample(args.resolution)
+    save(args.output, out, out.uv)
+    if args.plot:
+        from .fitting import plot_isocurves
+
+        plot_isocurves(surf, args.plot)
+    print(f"{args.output}: {args.surface} surface sampled on a {args.resolution}^2 grid, "
+          f"{out.n_faces} faces ({time.perf_counter() - t:.2f} s)")
+    return EXIT_OK
+
+
+def _add_points_commands(sub) -> None:
+    p = sub.add_parser("meshless", help="parameterize and triangulate unorganized points")
+    p.add_argument("points")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--k", type=int, default=10)
+    p.add_argument("--weights", choices=["uniform", "inverse-distance", "shape-preserving", "mean-value"],
+                   default="inverse-distance")
+    p.add_argument("--boundary", choices=["circle", "square"], default="circle")
+    p.add_argument("--report")
+    p.add_argument("--plot")
+    p.set_defaults(func=cmd_meshless)
+    p = sub.add_parser("fit", help="a smooth surface over a mesh's UVs")
+    p.add_argument("mesh")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--surface", choices=["spline", "clough-tocher"], default="spline")
+    p.add_argument("--resolution", type=int, default=64)
+    p.add_argument("--plot")
+    p.set_defaults(func=cmd_fit)
+
+
 def _add_flatten_options(p) -> None:
     p.add_argument("--weights", choices=WEIGHTS, default="shape-preserving")
     p.add_argument("--boundary", choices=BOUNDARIES, default="circle")
@@ -186,7 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Functions ``f(subparsers)`` that add further subcommands (points, remeshing, ...).
-_EXTENSIONS: list = []
+_EXTENSIONS: list = [_add_points_commands]
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,48 @@
+import numpy as np
+import pytest
+
+import jaxparam as jp
+
+
+@pytest.fixture(scope="module")
+def mesh_uv():
+    mesh = jp.shapes.graph_surface(25)
+    return mesh, np.asarray(jp.convex_map(mesh, weights="shape_preserving", boundary="square"))
+
+
+def test_clough_tocher_interpolates(mesh_uv):
+    mesh, uv = mesh_uv
+    s = jp.fit_surface(mesh, uv, kind="clough_tocher")
+    np.testing.assert_allclose(s.evaluate(uv), np.asarray(mesh.vertices), atol=1e-10)
+
+
+def test_spline_approximates_and_samples(mesh_uv):
+    mesh, uv = mesh_uv
+    s = jp.fit_surface(mesh, uv, kind="spline")
+    diag = np.linalg.norm(np.ptp(np.asarray(mesh.vertices), 0))
+    assert s.residual_rms < 0.01 * diag
+    patch = s.sample(20)
+    assert patch.n_faces == 2 * 19 * 19 and patch.uv.shape == (400, 2)
+
+
+def test_better_parameterization_gives_better_spline():
+    # Survey Figs. 6 and 8: the spline through a shape-preserving map fits better than uniform.
+    mesh = jp.shapes.example5(20)
+    res = {w: jp.fit_surface(mesh, np.asarray(jp.convex_map(mesh, weights=w, boundary="square")),
+                             kind="spline", knots=6).residual_rms
+           for w in ["uniform", "shape_preserving"]}
+    assert res["shape_preserving"] < res["uniform"]
+
+
+def test_isocurve_picture(tmp_path, mesh_uv):
+    mesh, uv = mesh_uv
+    p = jp.fitting.plot_isocurves(jp.fit_surface(mesh, uv), tmp_path / "iso.png")
+    assert p.stat().st_size > 5000
+
+
+def test_fit_errors(mesh_uv):
+    mesh, uv = mesh_uv
+    with pytest.raises(jp.MeshError, match="unknown kind"):
+        jp.fit_surface(mesh, uv, kind="nurbs")
+    with pytest.raises(jp.MeshError, match=r"uv must have shape"):
+        jp.fit_surface(mesh, uv[:5])

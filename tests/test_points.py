@@ -1,0 +1,163 @@
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import jaxparam as jp
+from jaxparam import points as PT
+from jaxparam.errors import MeshFileError, PointCloudError
+from conftest import data_path
+
+
+@pytest.fixture(scope="module")
+def surface_points():
+    """Vertices of a generated graph surface, shuffled; and the mesh they came from."""
+    mesh = jp.shapes.graph_surface(24, jitter=0.3, seed=1)   # jittered: a unique Delaunay triangulation
+    perm = np.random.default_rng(0).permutation(mesh.n_vertices)
+    return np.asarray(mesh.vertices)[perm], perm, mesh
+
+
+@pytest.mark.parametrize("kind", PT.WEIGHTS)
+def test_weights_positive_and_sum_to_one(surface_points, kind):
+    P, _, _ = surface_points
+    g = PT.point_graph(P, 10)
+    bnd = PT.detect_boundary(P, g)
+    S = PT._system(g, bnd, len(P))
+    w = np.asarray(PT._fan_weights(jnp.asarray(P), S.center, S.nbr, S.nxt, S.prev, S.rows_e,
+                                   S.row_start, S.row_end, S.degree, kind=kind, n_rows=S.n_rows,
+                                   max_degree=32))
+    assert w.min() > 0
+    lam = w / np.bincount(S.rows_e, weights=w)[S.rows_e]
+    np.testing.assert_allclose(np.bincount(S.rows_e, weights=lam), 1.0, atol=1e-12)
+
+
+def test_boundary_detection_precision_recall(surface_points):
+    P, perm, mesh = surface_points
+    uv, bnd = jp.meshless_map(P)
+    true = set(np.flatnonzero(np.isin(perm, mesh.topology.boundary_loops[0])).tolist())
+    found = set(bnd.tolist())
+    precision = len(true & found) / len(found)
+    recall = len(true & found) / len(true)
+    assert precision >= 0.95 and recall >= 0.9, (precision, recall)
+
+
+def test_map_is_one_to_one_reconstruction_recovers_edges(surface_points):
+    P, perm, mesh = surface_points
+    rec = jp.reconstruct_surface(P)
+    assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
+    used = rec.topology.referenced.mean()
+    assert used >= 0.98
+    E0 = {tuple(e) for e in np.sort(np.argsort(perm)[mesh.topology.edges], 1).tolist()}
+    E1 = {tuple(e) for e in rec.topology.edges.tolist()}
+    # Measured 77 %: Delaunay of the meshless UVs flips some of the source mesh's diagonals.
+    assert len(E0 & E1) / len(E0) >= 0.75
+    # Every reconstructed face lies on the source surface: within 1% of the diagonal.
+    src = mesh
+    from scipy.spatial import cKDTree
+    cent = np.asarray(rec.vertices)[rec.faces].mean(1)
+    dense = jp.shapes.refine(src, 2)
+    d, _ = cKDTree(np.asarray(dense.vertices)).query(cent)
+    diag = np.linalg.norm(np.ptp(P, axis=0))
+    assert d.max() / diag < 0.01
+
+
+def test_noisy_points_still_one_to_one():
+    mesh = jp.shapes.graph_surface(20)
+    P = np.asarray(mesh.vertices) + np.random.default_rng(2).normal(0, 0.002, (mesh.n_vertices, 3))
+    uv, bnd = jp.meshless_map(P, weights="shape_preserving")
+    rec = jp.reconstruct_surface(P)
+    assert jp.distortion(rec, rec.uv).flips == 0
+
+
+@pytest.mark.parametrize("kind, rtol", [("inverse_distance", 1e-6), ("mean_value", 1e-4)])
+def test_gradient_through_meshless_map(surface_points, kind, rtol):
+    P, _, _ = surface_points
+    g = PT.point_graph(P, 10)
+    bnd = PT.detect_boundary(P, g)
+    c = np.random.default_rng(0).standard_normal((len(P), 2))
+
+    def loss(X):
+        uv, _ = jp.meshless_map(X, graph=g, boundary_indices=bnd, weights=kind)
+        return jnp.sum(c * uv)
+
+    grad = np.asarray(jax.grad(loss)(jnp.asarray(P)))
+    d = np.random.default_rng(1).standard_normal(P.shape)
+    h = 1e-6
+    fd = (loss(jnp.asarray(P + h * d)) - loss(jnp.asarray(P - h * d))) / (2 * h)
+    # Tolerance: mean-value weights have large second derivatives (tan of half angles).
+    assert abs(np.sum(grad * d) - fd) <= rtol * max(1.0, abs(fd))
+
+
+def test_point_errors(tmp_path):
+    P = np.random.default_rng(0).random((50, 3))
+    with pytest.raises(PointCloudError, match="too few"):
+        jp.meshless_map(P[:3])
+    with pytest.raises(PointCloudError, match=r"points 50 .*duplicate"):
+        jp.meshless_map(np.vstack([P, P[:1]]))
+    with pytest.raises(PointCloudError, match="collinear"):
+        jp.meshless_map(np.outer(np.arange(20.0), [1, 2, 3]))
+    with pytest.raises(PointCloudError, match="coincident|duplicate"):
+        jp.meshless_map(np.zeros((20, 3)))
+    with pytest.raises(PointCloudError, match="k = 60"):
+        jp.meshless_map(P, k=60)
+    with pytest.raises(PointCloudError, match="non-finite"):
+        jp.meshless_map(np.vstack([P, [[np.nan, 0, 0]]]))
+    with pytest.raises(PointCloudError, match="unknown weights"):
+        jp.meshless_map(P, weights="cot")
+    uv, bnd = jp.meshless_map(np.vstack([P, P[:2]]), merge_duplicates=True)
+    assert uv.shape == (50, 2)
+
+
+def test_unreachable_cluster_is_reported():
+    mesh = jp.shapes.graph_surface(12)
+    P = np.asarray(mesh.vertices)
+    far = P[:12] + 50.0                    # an island that cannot reach the boundary
+    Q = np.vstack([P, far])
+    g = PT.point_graph(Q, 6)
+    bnd = mesh.topology.boundary_loops[0]
+    with pytest.raises(PointCloudError, match=r"12 points cannot reach the boundary .*\(e.g. point 1\d\d\)"):
+        jp.meshless_map(Q, k=6, graph=g, boundary_indices=bnd)
+
+
+def test_load_points_formats(tmp_path):
+    P = np.random.default_rng(0).random((20, 3))
+    np.savetxt(tmp_path / "p.xyz", P)
+    np.save(tmp_path / "p.npy", P)
+    np.testing.assert_allclose(jp.load_points(tmp_path / "p.xyz"), P)
+    np.testing.assert_allclose(jp.load_points(tmp_path / "p.npy"), P)
+    (tmp_path / "bad.xyz").write_text("0 0 0\n1 2\n")
+    with pytest.raises(MeshFileError, match="line 2"):
+        jp.load_points(tmp_path / "bad.xyz")
+    with pytest.raises(MeshFileError, match="no such file"):
+        jp.load_points(tmp_path / "none.xyz")
+
+
+def test_cli_meshless_and_fit(tmp_path, surface_points):
+    from jaxparam.cli import main
+    P, _, _ = surface_points
+    np.savetxt(tmp_path / "p.xyz", P)
+    rep = tmp_path / "r.json"
+    assert main(["meshless", str(tmp_path / "p.xyz"), "-o", str(tmp_path / "rec.obj"),
+                 "--report", str(rep), "--plot", str(tmp_path / "rec.png")]) == 0
+    r = json.loads(rep.read_text())
+    assert r["flips"] == 0 and r["points_used"] >= 0.98 * len(P)
+    m = jp.load(tmp_path / "rec.obj")
+    np.testing.assert_allclose(np.asarray(m.vertices), P, rtol=1e-15)
+    assert main(["fit", str(tmp_path / "rec.obj"), "-o", str(tmp_path / "fit.obj"),
+                 "--surface", "clough-tocher", "--resolution", "30"]) == 0
+    assert jp.load(tmp_path / "fit.obj").n_faces > 100
+    jp.save(tmp_path / "nouv.obj", jp.shapes.plane_grid(4, 4))
+    assert main(["fit", str(tmp_path / "nouv.obj"), "-o", str(tmp_path / "x.obj")]) == 3
+
+
+@pytest.mark.data
+def test_bump_domain_half_points():
+    P = jp.load_points(data_path("points", "bump-domain-half.xyz"))
+    rec = jp.reconstruct_surface(P)
+    assert jp.distortion(rec, rec.uv).flips == 0
+    # Measured: 72 % of the points end up in the disk (the rest are peeled off with bridging
+    # triangles); issue 4 keeps this open.
+    assert rec.topology.referenced.mean() > 0.7
