@@ -224,11 +224,21 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     return PointGraph(indptr, indices, gap, normal, spacing)
 
 
-def detect_boundary(points, graph: PointGraph, *, gap: float = 0.6 * np.pi) -> np.ndarray:
+def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7 * np.pi,
+                    k_detect: int = 24) -> np.ndarray:
     """Boundary points as one closed polygon (indices in order, anticlockwise about the
-    global normal), from the candidates whose largest angular gap exceeds ``gap``."""
+    global normal).
+
+    Candidates: points whose ``k_detect`` nearest neighbours, projected on the
+    tangent plane, leave an angular gap larger than ``gap`` (a larger
+    neighbourhood than the map's: random samplings leave wide gaps in small
+    ones).  Candidates within three spacings of each other are linked; the
+    largest linked group is kept (stray interior candidates drop out) and
+    ordered along the longest path of its minimum spanning tree.
+    """
     P = np.asarray(points, np.float64)
-    cand = np.flatnonzero(graph.gap > gap)
+    det = point_graph(P, min(k_detect, P.shape[0] - 1), symmetric=False)
+    cand = np.flatnonzero(det.gap > gap)
     if cand.size < 3:
         raise PointCloudError(f"meshless_map: found {cand.size} boundary points (largest angular gap "
                               f"> {gap:.2f} rad); the points may sample a closed surface. Pass "
@@ -236,10 +246,19 @@ def detect_boundary(points, graph: PointGraph, *, gap: float = 0.6 * np.pi) -> n
     Q = P[cand]
     kk = min(8, cand.size - 1)
     dist, idx = cKDTree(Q).query(Q, kk + 1)
+    link = 3.0 * np.median(det.spacing[cand])
     rows = np.repeat(np.arange(cand.size), kk)
-    W = sp.csr_matrix((dist[:, 1:].reshape(-1) + 1e-300, (rows, idx[:, 1:].reshape(-1))),
-                      shape=(cand.size,) * 2)
+    d = dist[:, 1:].reshape(-1)
+    ok = d <= link
+    W = sp.csr_matrix((d[ok] + 1e-300, (rows[ok], idx[:, 1:].reshape(-1)[ok])), shape=(cand.size,) * 2)
     W = W.maximum(W.T)
+    from scipy.sparse.csgraph import connected_components
+    _, lab = connected_components(W, directed=False)
+    big = np.flatnonzero(lab == np.argmax(np.bincount(lab)))
+    cand, W = cand[big], W[big][:, big]
+    if cand.size < 3:
+        raise PointCloudError("meshless_map: the boundary candidates do not form a chain; pass "
+                              "boundary=indices, or change k_detect/gap.")
     T = minimum_spanning_tree(W)
     T = T + T.T
     # Longest path in the spanning forest's largest tree: two sweeps of shortest paths.
@@ -367,7 +386,7 @@ def _check_solvable(S: _System, N: int, boundary: np.ndarray) -> None:
 
 def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boundary="circle",
                  spacing: str = "chord", boundary_indices=None, radius: float | None = None,
-                 symmetric: bool = True, gap: float = 0.6 * np.pi, graph: PointGraph | None = None,
+                 symmetric: bool = True, gap: float = 0.7 * np.pi, graph: PointGraph | None = None,
                  merge_duplicates: bool = False):
     """Meshless parameterization of unorganized points (survey §8).
 
@@ -463,23 +482,40 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> Tri
     L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
     local = graph.spacing[F].mean(1)
     too_long = L.max(1) > bridge_factor * local
-    keep = np.ones(len(F), bool)
-    while True:
-        sub = F[keep]
-        e = np.sort(np.concatenate([sub[:, [0, 1]], sub[:, [1, 2]], sub[:, [2, 0]]]), axis=1)
-        key = e[:, 0] * np.int64(len(P)) + e[:, 1]
-        uniq, cnt = np.unique(key, return_counts=True)
-        on_bd = np.isin(key, uniq[cnt == 1]).reshape(3, -1).any(0)
-        drop = np.flatnonzero(keep)[on_bd & too_long[keep]]
-        if drop.size == 0:
-            break
-        keep[drop] = False
+    # Peel in one pass: the too-long faces connected to the outside through too-long faces.
+    keep = ~_outside_bridges(F, too_long, len(P))
     F = _largest_manifold_disk(F[keep], len(P))
     n_in = np.asarray(points).shape[0]
     V = np.asarray(points, np.float64) if kept.size == n_in else P
     mesh = TriMesh(V if kept.size == n_in else P, F, uv=U, validate=False, name="reconstruction")
     mesh.boundary_points = bnd
     return mesh
+
+
+def _outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
+    """Faces flagged ``bad`` that reach the triangulation's outside through bad faces only."""
+    m = len(F)
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    f = np.tile(np.arange(m), 3)
+    key = np.minimum(e[:, 0], e[:, 1]) * np.int64(n) + np.maximum(e[:, 0], e[:, 1])
+    order = np.argsort(key, kind="stable")
+    ks, fs = key[order], f[order]
+    pair = np.flatnonzero(ks[1:] == ks[:-1])
+    a, b = fs[pair], fs[pair + 1]
+    both = bad[a] & bad[b]
+    single = np.ones(ks.size, bool)
+    single[pair] = False
+    single[pair + 1] = False
+    hull_faces = np.unique(fs[single])
+    hull_faces = hull_faces[bad[hull_faces]]
+    out = m
+    rows = np.concatenate([a[both], b[both], np.full(hull_faces.size, out)])
+    cols = np.concatenate([b[both], a[both], hull_faces])
+    G = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(m + 1, m + 1))
+    reached = breadth_first_order(G, out, directed=False, return_predecessors=False)
+    mask = np.zeros(m + 1, bool)
+    mask[reached] = True
+    return mask[:m]
 
 
 def _largest_manifold_disk(F: np.ndarray, n: int) -> np.ndarray:
