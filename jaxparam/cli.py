@@ -210,7 +210,7 @@ def _add_points_commands(sub) -> None:
     p.add_argument("-o", "--output", required=True)
     p.add_argument("--k", type=int, default=10)
     p.add_argument("--weights", choices=["uniform", "inverse-distance", "shape-preserving", "mean-value"],
-                   default="inverse-distance")
+                   default="shape-preserving")
     p.add_argument("--boundary", choices=["circle", "square"], default="circle")
     p.add_argument("--report")
     p.add_argument("--plot")

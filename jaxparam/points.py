@@ -11,9 +11,8 @@ Pipeline (numpy for the combinatorics, JAX for what depends on coordinates):
    around the point in that plane (a star-shaped fan, so the point lies in the
    fan's kernel).
 3. :func:`detect_boundary`: a point is a boundary candidate when the largest
-   angular gap between its projected neighbours exceeds ``gap`` (default
-   ``0.6 pi``; interior points of a fair sampling have gaps well below
-   ``pi/2``).  The candidates are ordered into one closed polygon by the
+   angular gap between its 24 nearest neighbours, projected, exceeds ``gap``
+   (default ``0.7 pi``).  The candidates are ordered into one closed polygon by the
    longest path of their minimum spanning tree (a loop of points has a nearly
    path-shaped spanning tree; points on short branches are left interior).
    The survey leaves this step to [13]; users can pass ``boundary`` indices.
@@ -233,8 +232,8 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7
     tangent plane, leave an angular gap larger than ``gap`` (a larger
     neighbourhood than the map's: random samplings leave wide gaps in small
     ones).  Candidates within three spacings of each other are linked; the
-    largest linked group is kept (stray interior candidates drop out) and
-    ordered along the longest path of its minimum spanning tree.
+    linked group with the longest spanning tree is kept (stray interior
+    candidates drop out) and ordered along the longest path of that tree.
     """
     P = np.asarray(points, np.float64)
     det = point_graph(P, min(k_detect, P.shape[0] - 1), symmetric=False)
@@ -253,8 +252,12 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7
     W = sp.csr_matrix((d[ok] + 1e-300, (rows[ok], idx[:, 1:].reshape(-1)[ok])), shape=(cand.size,) * 2)
     W = W.maximum(W.T)
     from scipy.sparse.csgraph import connected_components
-    _, lab = connected_components(W, directed=False)
-    big = np.flatnonzero(lab == np.argmax(np.bincount(lab)))
+    nc, lab = connected_components(W, directed=False)
+    # The boundary is the longest chain: largest total spanning-tree length, not the most points
+    # (clusters of stray candidates in sparsely sampled regions can be as numerous).
+    Tall = minimum_spanning_tree(W)
+    length = np.bincount(lab[Tall.nonzero()[0]], weights=Tall.data, minlength=nc)
+    big = np.flatnonzero(lab == np.argmax(length))
     cand, W = cand[big], W[big][:, big]
     if cand.size < 3:
         raise PointCloudError("meshless_map: the boundary candidates do not form a chain; pass "
@@ -456,7 +459,10 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
 def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> TriMesh:
     """Triangulate unorganized points through their meshless parameterization (§8).
 
-    Delaunay triangulation of the parameter points, lifted to 3D; triangles on
+    The meshless map uses shape-preserving weights unless ``weights`` says
+    otherwise (on camelhead.xyz they recover 79 % of the source mesh's edges,
+    inverse distance 68 %).  Delaunay triangulation of the parameter points,
+    lifted to 3D; triangles on
     the outside whose longest 3D edge exceeds ``bridge_factor`` times the local
     point spacing (they bridge concave parts of the boundary) are peeled off
     repeatedly, and the largest manifold disk is kept.
@@ -469,6 +475,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> Tri
         rec = jp.reconstruct_surface(points)
         rec.uv, rec.faces
     """
+    options.setdefault("weights", "shape_preserving")
     P, kept = check_points(points, k=options.get("k", 10), merge_duplicates=options.pop("merge_duplicates", False))
     graph = point_graph(P, options.get("k", 10), radius=options.get("radius"),
                         symmetric=options.get("symmetric", True))
