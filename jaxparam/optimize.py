@@ -356,7 +356,7 @@ def _run(prob: _Problem, solver: str, max_iters: int, energy_rtol: float, grad_r
             vals[diag] += 1e-10 * max(float(np.mean(vals[diag])), 1e-300) + (
                 1e-8 * float(np.mean(vals[diag])) if prob.free_boundary else 0.0)
             fac = sparse.factorize(P, vals, symmetric=True)
-            d = -fac.solve(g)
+            d = -fac.solve(g, residual_tol=tol.NEWTON_RESIDUAL)
             x_new, f_new, step = _line_search(prob, x, f, g, d)
         elif solver in ("lbfgs", "bfgs"):
             # optimistix takes search trials; one iteration here is one accepted step.

@@ -270,7 +270,7 @@ class Factorization:
             self._matrix = self.pattern.matrix(self.values)
         return self._matrix
 
-    def _solve(self, b, transpose: bool) -> np.ndarray:
+    def _solve(self, b, transpose: bool, residual_tol: float = tol.SOLVE_RESIDUAL) -> np.ndarray:
         b = np.asarray(b, np.float64)
         if b.shape[0] != self.n or b.ndim not in (1, 2):
             raise SolverError(f"sparse: right-hand side must have shape ({self.n},) or ({self.n}, k), "
@@ -279,18 +279,19 @@ class Factorization:
         x = self._raw_solve(b, transpose)
         A = self.matrix().T if transpose else self.matrix()
         res = np.linalg.norm(A @ x - b) / max(np.linalg.norm(b), np.finfo(float).tiny)
-        if not np.isfinite(res) or res > tol.SOLVE_RESIDUAL:
+        if not np.isfinite(res) or res > residual_tol:
             if self.backend != "scipy":
                 other = Factorization(self.pattern, self.values, self.symmetric, "scipy")
-                return other._solve(b, transpose)
+                return other._solve(b, transpose, residual_tol)
             raise SolverError(f"sparse: the solve of a {self.n} x {self.n} system left a relative "
-                              f"residual of {res:.3g} (> {tol.SOLVE_RESIDUAL:g}); the matrix is "
+                              f"residual of {res:.3g} (> {residual_tol:g}); the matrix is "
                               "singular or badly conditioned.", stage="solve")
         return x
 
-    def solve(self, b) -> np.ndarray:
-        """``x`` with ``A x = b``; ``b: (n,)`` or ``(n, k)``."""
-        return self._solve(b, False)
+    def solve(self, b, *, residual_tol: float = tol.SOLVE_RESIDUAL) -> np.ndarray:
+        """``x`` with ``A x = b``; ``b: (n,)`` or ``(n, k)``.  The relative residual must reach
+        ``residual_tol`` (a Newton direction, checked by a line search, may ask for less)."""
+        return self._solve(b, False, residual_tol)
 
     def solve_transpose(self, b) -> np.ndarray:
         """``x`` with ``A^T x = b``."""

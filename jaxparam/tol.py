@@ -39,3 +39,7 @@ GRAD_RTOL = 1e-8
 #: Collinearity tolerance of the boundary convexity check: a turn whose sine is
 #: smaller than this (relative) still counts as convex (straight).
 CONVEX_SIN = 1e-12
+
+#: Relative residual accepted for a Newton direction: the flip-free line search checks
+#: every step, so the direction need only be a good descent direction.
+NEWTON_RESIDUAL = 1e-6
