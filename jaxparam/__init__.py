@@ -17,7 +17,7 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from . import errors, tol, topology, geometry, boundary, weights, sparse  # noqa: E402
-from . import linear, metrics, shapes, energies, optimize, points, fitting  # noqa: E402
+from . import linear, metrics, shapes, energies, optimize, points, fitting, plot  # noqa: E402
 from .errors import (  # noqa: E402
     DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
     PointCloudError, SolverError, TopologyError,
@@ -39,5 +39,5 @@ __all__ = [
     "errors", "tol", "topology", "geometry", "boundary", "weights", "sparse", "linear",
     "metrics", "shapes", "energies", "optimize", "energy", "Energy", "ENERGIES", "minimize",
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
-    "fitting", "fit_surface",
+    "fitting", "fit_surface", "plot",
 ]

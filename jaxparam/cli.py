@@ -196,7 +196,7 @@ def cmd_fit(args) -> int:
     out = surf.sample(args.resolution)
     save(args.output, out, out.uv)
     if args.plot:
-        from .fitting import plot_isocurves
+        from .plot import plot_isocurves
 
         plot_isocurves(surf, args.plot)
     print(f"{args.output}: {args.surface} surface sampled on a {args.resolution}^2 grid, "

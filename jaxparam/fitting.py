@@ -15,14 +15,13 @@ iso-curves of ``s`` (Fig. 6 uniform vs Fig. 8 shape-preserving).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from .errors import MeshError
-from .mesh import TriMesh
+from .mesh import TriMesh, grid_faces
 
-__all__ = ["Surface", "fit_surface", "plot_isocurves", "KINDS"]
+__all__ = ["Surface", "fit_surface", "KINDS"]
 
 KINDS = ("spline", "clough_tocher")
 
@@ -47,8 +46,6 @@ class Surface:
     def sample(self, resolution: int = 64) -> TriMesh:
         """A ``resolution x resolution`` grid over the domain, triangulated, clipped to where
         the surface is defined; UVs kept in ``.uv``."""
-        from .shapes import grid_faces
-
         (u0, u1), (v0, v1) = self.bbox
         u, v = np.meshgrid(np.linspace(u0, u1, resolution), np.linspace(v0, v1, resolution), indexing="ij")
         UV = np.column_stack([u.ravel(), v.ravel()])
@@ -119,37 +116,3 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
         return out
 
     return Surface(kind, bbox, ev, float(res))
-
-
-def plot_isocurves(surface: Surface, path, *, lines: int = 12, samples: int = 200,
-                   title: str | None = None):
-    """Draw iso-parameter curves ``u = const`` and ``v = const`` of the surface (Figs. 6, 8)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    (u0, u1), (v0, v1) = surface.bbox
-    fig = plt.figure(figsize=(6, 6), dpi=110)
-    ax = fig.add_subplot(111, projection="3d")
-    t = np.linspace(0, 1, samples)
-    pts = []
-    for c in np.linspace(0, 1, lines):
-        for uv, color in (((u0 + c * (u1 - u0)) * np.ones_like(t), v0 + t * (v1 - v0)), "tab:blue"), \
-                         ((u0 + t * (u1 - u0), (v0 + c * (v1 - v0)) * np.ones_like(t)), "tab:red"):
-            X = surface.evaluate(np.column_stack(uv))
-            ax.plot(X[:, 0], X[:, 1], X[:, 2], color=color, lw=0.8)
-            pts.append(X[np.all(np.isfinite(X), 1)])
-    P = np.concatenate(pts)
-    if P.size:
-        mid, r = (P.max(0) + P.min(0)) / 2, (P.max(0) - P.min(0)).max() / 2
-        ax.set_xlim(mid[0] - r, mid[0] + r)
-        ax.set_ylim(mid[1] - r, mid[1] + r)
-        ax.set_zlim(mid[2] - r, mid[2] + r)
-    ax.set_axis_off()
-    ax.set_title(title or f"iso-parameter curves of the {surface.kind} surface")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
-    return path

@@ -20,7 +20,7 @@ from . import tol
 from . import topology as topo
 from .errors import DegenerateFaceError, MeshError, MeshFileError, first_few
 
-__all__ = ["TriMesh", "load", "save", "read_obj", "read_off", "atomic_write"]
+__all__ = ["TriMesh", "load", "save", "read_obj", "read_off", "atomic_write", "grid_faces"]
 
 
 def _is_concrete(x) -> bool:
@@ -129,6 +129,18 @@ class TriMesh:
                 f"TriMesh: faces {first_few(zero)} have zero area (face {int(zero[0])} = "
                 f"{tuple(int(v) for v in F[zero[0]])}); collapse or remove them "
                 "(e.g. trimesh's remove_degenerate_faces), or pass validate=False to keep them.")
+
+
+def grid_faces(nu: int, nv: int) -> np.ndarray:
+    """Faces of a ``nu x nv`` vertex grid (vertex ``i * nv + j``), two triangles a cell,
+    diagonals alternating so the grid has no preferred direction."""
+    i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
+    a = (i * nv + j).ravel()
+    b, c, d = a + nv, a + nv + 1, a + 1
+    flip = ((i + j) % 2 == 1).ravel()
+    t1 = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
+    t2 = np.where(flip[:, None], np.stack([b, c, d], 1), np.stack([a, c, d], 1))
+    return np.concatenate([t1, t2]).astype(np.int64)
 
 
 # ------------------------------------------------------------------------------------------

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import metrics
 
-__all__ = ["plot_uv", "plot_checkerboard"]
+__all__ = ["plot_uv", "plot_checkerboard", "plot_isocurves"]
 
 
 def _figure(size=(6, 6)):
@@ -21,6 +21,23 @@ def _figure(size=(6, 6)):
     import matplotlib.pyplot as plt
 
     return plt, plt.figure(figsize=size, dpi=110)
+
+
+def _equal_axes_3d(ax, P) -> None:
+    """Equal scales on the three axes of a 3D plot around the points ``P: (k, 3)``."""
+    if P.size:
+        mid, r = (P.max(0) + P.min(0)) / 2, (P.max(0) - P.min(0)).max() / 2
+        ax.set_xlim(mid[0] - r, mid[0] + r)
+        ax.set_ylim(mid[1] - r, mid[1] + r)
+        ax.set_zlim(mid[2] - r, mid[2] + r)
+
+
+def _save(plt, fig, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def plot_uv(mesh, uv, path, *, title: str | None = None, quantity: str = "aspect"):
@@ -64,11 +81,7 @@ def plot_uv(mesh, uv, path, *, title: str | None = None, quantity: str = "aspect
     ax.set_aspect("equal")
     ax.set_title(title or f"{mesh.name or 'mesh'}: {len(F)} faces, {flipped.size} flipped")
     ax.set_axis_off()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
 
 
 def plot_checkerboard(mesh, uv, path, *, squares: int = 8, title: str | None = None,
@@ -92,16 +105,28 @@ def plot_checkerboard(mesh, uv, path, *, squares: int = 8, title: str | None = N
     plt, fig = _figure()
     ax = fig.add_subplot(111, projection="3d")
     ax.add_collection3d(Poly3DCollection(P, facecolors=colors, edgecolors="none"))
-    mn, mx = V.min(0), V.max(0)
-    mid, r = (mn + mx) / 2, (mx - mn).max() / 2
-    ax.set_xlim(mid[0] - r, mid[0] + r)
-    ax.set_ylim(mid[1] - r, mid[1] + r)
-    ax.set_zlim(mid[2] - r, mid[2] + r)
+    _equal_axes_3d(ax, V)
     ax.view_init(elev=elev, azim=azim)
     ax.set_axis_off()
     ax.set_title(title or f"{mesh.name or 'mesh'}: checkerboard through the UV map")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path)
+
+
+def plot_isocurves(surface: Surface, path, *, lines: int = 12, samples: int = 200,
+                   title: str | None = None):
+    """Draw iso-parameter curves ``u = const`` and ``v = const`` of the surface (Figs. 6, 8)."""
+    (u0, u1), (v0, v1) = surface.bbox
+    plt, fig = _figure()
+    ax = fig.add_subplot(111, projection="3d")
+    t = np.linspace(0, 1, samples)
+    pts = []
+    for c in np.linspace(0, 1, lines):
+        for uv, color in (((u0 + c * (u1 - u0)) * np.ones_like(t), v0 + t * (v1 - v0)), "tab:blue"), \
+                         ((u0 + t * (u1 - u0), (v0 + c * (v1 - v0)) * np.ones_like(t)), "tab:red"):
+            X = surface.evaluate(np.column_stack(uv))
+            ax.plot(X[:, 0], X[:, 1], X[:, 2], color=color, lw=0.8)
+            pts.append(X[np.all(np.isfinite(X), 1)])
+    _equal_axes_3d(ax, np.concatenate(pts))
+    ax.set_axis_off()
+    ax.set_title(title or f"iso-parameter curves of the {surface.kind} surface")
+    return _save(plt, fig, path)

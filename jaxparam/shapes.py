@@ -7,22 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import TriMesh
+from .mesh import TriMesh, grid_faces
 
 __all__ = ["grid_faces", "plane_grid", "graph_surface", "cylinder_patch", "example5",
            "disk", "sphere", "torus", "refine"]
-
-
-def grid_faces(nu: int, nv: int) -> np.ndarray:
-    """Faces of a ``nu x nv`` vertex grid (vertex ``i * nv + j``), two triangles a cell,
-    diagonals alternating so the grid has no preferred direction."""
-    i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
-    a = (i * nv + j).ravel()
-    b, c, d = a + nv, a + nv + 1, a + 1
-    flip = ((i + j) % 2 == 1).ravel()
-    t1 = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
-    t2 = np.where(flip[:, None], np.stack([b, c, d], 1), np.stack([a, c, d], 1))
-    return np.concatenate([t1, t2]).astype(np.int64)
 
 
 def _grid_uv(nu: int, nv: int, jitter: float = 0.0, seed: int = 0) -> np.ndarray:

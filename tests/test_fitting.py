@@ -36,7 +36,7 @@ def test_better_parameterization_gives_better_spline():
 
 def test_isocurve_picture(tmp_path, mesh_uv):
     mesh, uv = mesh_uv
-    p = jp.fitting.plot_isocurves(jp.fit_surface(mesh, uv), tmp_path / "iso.png")
+    p = jp.plot.plot_isocurves(jp.fit_surface(mesh, uv), tmp_path / "iso.png")
     assert p.stat().st_size > 5000
 
 
