@@ -153,8 +153,19 @@ def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_deg
     ak, al, am = cross(pl, pm), cross(pm, pk), cross(pk, pl)
     tot = ak + al + am
     k_idx = jnp.arange(p.shape[0])
+    # An angle of pi or more at the centre (a sliver) makes the opposite "triangle" contain p_k
+    # itself: then p lies on the edge from p_k to its neighbour, weighted by 1D interpolation.
+    on_l, on_m = l == k_idx, m == k_idx
+    flat = on_l | on_m | (jnp.abs(tot) <= 1e-300)
+    tot = jnp.where(flat, 1.0, tot)
+    rk, rl, rm = r, r[l], r[m]
+    other = jnp.where(on_l, rm, rl)
+    share_k = other / (rk + other)
+    ak = jnp.where(flat, share_k, ak / tot)
+    al = jnp.where(on_l, 0.0, jnp.where(on_m, 1.0 - share_k, al / tot))
+    am = jnp.where(on_m, 0.0, jnp.where(on_l, 1.0 - share_k, am / tot))
     idx = jnp.concatenate([k_idx, l, m])
-    tau = jnp.concatenate([ak, al, am]) / jnp.concatenate([tot, tot, tot])
+    tau = jnp.concatenate([ak, al, am])
     lam = jax.ops.segment_sum(tau, idx, num_segments=p.shape[0])
     return lam / degree[row]
 
