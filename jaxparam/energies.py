@@ -80,7 +80,10 @@ def _from_sv(fn, *, barrier=True):
         s2_safe = jnp.where(det > 0, s2, 1.0)
         s1_safe = jnp.where(det > 0, s1, 1.0)
         return _barrier(det, fn(s1_safe, s2_safe))
-    return _with_J(of_J)
+    density = _with_J(of_J)
+    if barrier:
+        density.of_sv = fn      # the energy as a function of (s1, s2), for analytic eigensystems
+    return density
 
 
 def _from_J(fn, *, barrier=True):

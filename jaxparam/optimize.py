@@ -103,6 +103,46 @@ def _max_step(x, d, base, free, F):
     return geo.max_step(_uv_of(x, base, free), D, F)
 
 
+def _projected_sv_hessian(J, f):
+    """PSD projection of the 4x4 Hessian of ``f(s1, s2)`` in ``vec J`` (row-major), in closed
+    form (Smith, De Goes, Kim 2019, "Analytic eigensystems for isotropic distortion energies").
+
+    With the signed SVD ``J = U diag(s1, s2) V^T``, the eigenvectors are the two scaling
+    modes ``U diag(1, 0) V^T`` and ``U diag(0, 1) V^T`` (coupled by the 2x2 Hessian of f),
+    the twist ``U [[0, -1], [1, 0]] V^T / sqrt 2`` with eigenvalue ``(f1 + f2) / (s1 + s2)`` and
+    the flip ``U [[0, 1], [1, 0]] V^T / sqrt 2`` with ``(f1 - f2) / (s1 - s2)`` (its limit
+    ``f11 - f12`` when ``s1 = s2``).  Negative eigenvalues are clamped to zero.
+    """
+    a, b, c, d = J[0, 0], J[0, 1], J[1, 0], J[1, 1]
+    E, F, G, H = 0.5 * (a + d), 0.5 * (a - d), 0.5 * (c + b), 0.5 * (c - b)
+    s1, s2 = geo.singular_values(J)
+    a1, a2 = jnp.arctan2(G, F), jnp.arctan2(H, E)
+    th, ph = 0.5 * (a2 - a1), 0.5 * (a2 + a1)
+    rot = lambda t: jnp.array([[jnp.cos(t), -jnp.sin(t)], [jnp.sin(t), jnp.cos(t)]])
+    U, V = rot(ph), rot(-th)
+    g = jax.grad(lambda s: f(s[0], s[1]))(jnp.stack([s1, s2]))
+    h = jax.hessian(lambda s: f(s[0], s[1]))(jnp.stack([s1, s2]))
+    mode = lambda M: (U @ M @ V.T).reshape(-1)
+    d1, d2 = mode(jnp.diag(jnp.array([1.0, 0.0]))), mode(jnp.diag(jnp.array([0.0, 1.0])))
+    tw = mode(jnp.array([[0.0, -1.0], [1.0, 0.0]])) / jnp.sqrt(2.0)
+    fl = mode(jnp.array([[0.0, 1.0], [1.0, 0.0]])) / jnp.sqrt(2.0)
+    gap = s1 - s2
+    close = jnp.abs(gap) <= 1e-8 * jnp.abs(s1)
+    lam_flip = jnp.where(close, h[0, 0] - h[0, 1], (g[0] - g[1]) / jnp.where(close, 1.0, gap))
+    lam_twist = (g[0] + g[1]) / (s1 + s2)
+    # The 2x2 scaling block, projected in closed form.
+    p_, r_, q_ = h[0, 0], h[0, 1], h[1, 1]
+    mid, rad = 0.5 * (p_ + q_), jnp.sqrt(0.25 * (p_ - q_) ** 2 + r_ ** 2)
+    psi = 0.5 * jnp.arctan2(2 * r_, p_ - q_)
+    e_plus = jnp.cos(psi) * d1 + jnp.sin(psi) * d2
+    e_minus = -jnp.sin(psi) * d1 + jnp.cos(psi) * d2
+    out = (jnp.maximum(mid + rad, 0.0) * jnp.outer(e_plus, e_plus)
+           + jnp.maximum(mid - rad, 0.0) * jnp.outer(e_minus, e_minus)
+           + jnp.maximum(lam_twist, 0.0) * jnp.outer(tw, tw)
+           + jnp.maximum(lam_flip, 0.0) * jnp.outer(fl, fl))
+    return out
+
+
 def _psd(H):
     """Clamp the eigenvalues of symmetric matrices ``(..., k, k)`` at zero."""
     lam, U = jnp.linalg.eigh(0.5 * (H + jnp.swapaxes(H, -1, -2)))
@@ -132,10 +172,14 @@ def _face_hessians(x, base, free, F, frames, areas, D, *, en, project):
     of_J = getattr(en.density, "of_J", None)
     if of_J is not None:
         J = jnp.einsum("mij,mj->mi", D, Q)
-        HJ = jax.vmap(jax.hessian(lambda JJ: of_J(JJ.reshape(2, 2))))(J)
+        of_sv = getattr(en.density, "of_sv", None)
+        if project and of_sv is not None:
+            HJ = jax.vmap(lambda JJ: _projected_sv_hessian(JJ.reshape(2, 2), of_sv))(J)
+        else:
+            HJ = jax.vmap(jax.hessian(lambda JJ: of_J(JJ.reshape(2, 2))))(J)
+            if project:
+                HJ = _psd(jnp.where(jnp.isfinite(HJ), HJ, 0.0))
         HJ = jnp.where(jnp.isfinite(HJ), HJ, 0.0)
-        if project:
-            HJ = _psd(HJ)
         H = jnp.einsum("mai,mab,mbj->mij", D, HJ, D)
     else:
         def h(frame, q):

@@ -118,3 +118,18 @@ def test_cli_flatten_with_energy(tmp_path, mesh):
     assert code == 0
     r = json.loads(rep.read_text())
     assert r["flips"] == 0 and r["iterations"] >= 1 and r["energy"] < 4.5
+
+
+@pytest.mark.parametrize("name", ["symmetric_dirichlet", "mips", "condition_f_squared", "condition_2"])
+def test_analytic_eigensystem_projection_matches_eigh(name):
+    from jaxparam import optimize as O
+    en = jp.energies.ENERGIES[name]
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        J = rng.standard_normal((2, 2))
+        if np.linalg.det(J) < 0:
+            J[0] *= -1
+        H = jax.hessian(lambda v: en.density.of_J(v.reshape(2, 2)))(jnp.asarray(J.reshape(-1)))
+        ref = np.asarray(O._psd(H[None]))[0]
+        got = np.asarray(O._projected_sv_hessian(jnp.asarray(J), en.density.of_sv))
+        np.testing.assert_allclose(got, ref, atol=1e-10 * np.abs(ref).max())
