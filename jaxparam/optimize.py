@@ -465,8 +465,7 @@ def _run(prob: _Problem, solver: str, max_iters: int, energy_rtol: float, grad_r
         x = prob.normalize(x)
         f = prob.value(x)
         history[-1] = f
-    _run.times = times
-    return x, f, it, converged, history, reason, time.perf_counter() - t0
+    return x, f, it, converged, (history, times), reason, time.perf_counter() - t0
 
 
 def _check_start(mesh, uv0, where="minimize"):
@@ -536,14 +535,14 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
         return _minimize_traced(mesh, en, uv0, free_boundary, solver, max_iters, energy_rtol,
                                 grad_rtol, max_seconds, verbose)
     prob = _Problem(mesh, en, free_boundary, uv0)
-    x, f, it, conv, hist, reason, secs = _run(prob, solver, max_iters, energy_rtol, grad_rtol,
-                                              max_seconds, verbose)
+    x, f, it, conv, (hist, times), reason, secs = _run(prob, solver, max_iters, energy_rtol,
+                                                       grad_rtol, max_seconds, verbose)
     uv = np.array(prob.uv(x))
     uv[~mesh.topology.referenced] = np.nan
     return MinimizeResult(uv=uv, energy=f, iterations=it, converged=conv, history=hist,
                           seconds=secs, reason=reason, flips=prob.flipped(x),
                           boundary_overlaps=metrics.boundary_overlaps(mesh, uv) if free_boundary else 0,
-                          solver=solver, times=list(_run.times))
+                          solver=solver, times=times)
 
 
 def _minimize_traced(mesh, en, uv0, free_boundary, solver, max_iters, energy_rtol, grad_rtol,
@@ -562,10 +561,10 @@ def _minimize_traced(mesh, en, uv0, free_boundary, solver, max_iters, energy_rto
     def solve_concrete(V):
         m = mesh.with_vertices(V)
         prob = _Problem(m, en, free_boundary, uv0)
-        x, f, it, conv, hist, reason, secs = _run(prob, solver, max_iters, energy_rtol, grad_rtol,
-                                                  max_seconds, verbose)
+        x, f, it, conv, (hist, times), reason, secs = _run(prob, solver, max_iters, energy_rtol,
+                                                           grad_rtol, max_seconds, verbose)
         info.update(energy=f, iterations=it, converged=conv, history=hist, reason=reason,
-                    seconds=secs, flips=prob.flipped(x), prob=prob, x=x)
+                    seconds=secs, flips=prob.flipped(x), prob=prob, x=x, times=times)
         return np.asarray(prob.uv(x))
 
     @jax.custom_vjp
@@ -604,4 +603,4 @@ def _minimize_traced(mesh, en, uv0, free_boundary, solver, max_iters, energy_rto
                           iterations=info.get("iterations", 0), converged=info.get("converged", False),
                           history=info.get("history", []), seconds=info.get("seconds", 0.0),
                           reason=info.get("reason", ""), flips=info.get("flips", 0),
-                          boundary_overlaps=0, solver=solver)
+                          boundary_overlaps=0, solver=solver, times=info.get("times", []))
