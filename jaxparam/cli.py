@@ -101,10 +101,10 @@ def flatten_mesh(mesh, args, *, say=print):
     from .linear import convex_map
 
     seconds = {}
-    extra = {"weights": args.weights, "boundary": args.boundary, "spacing": args.spacing}
     holes = max(0, len(mesh.topology.boundary_loops) - 1)
+    extra = {"weights": args.weights, "boundary": args.boundary, "spacing": args.spacing,
+             "holes_filled": holes}
     if holes:
-        extra["holes_filled"] = holes
         say(f"note: {holes} extra boundary loop(s) (holes) filled virtually; the longest loop "
             "is mapped to the boundary")
     t = time.perf_counter()
@@ -140,14 +140,22 @@ def cmd_flatten(args) -> int:
     uv, rep = flatten_mesh(mesh, args, say=lambda m: print(m, file=sys.stderr))
     rep["seconds"]["load"] = load_s
     t = time.perf_counter()
-    save(args.output, mesh, uv)
-    rep["seconds"]["save"] = time.perf_counter() - t
-    if args.report:
-        write_json(args.report, rep)
-    if args.plot:
-        from .plot import plot_uv
+    written = []
+    try:  # a failure while writing (or Ctrl-C) removes what this run already wrote
+        save(args.output, mesh, uv)
+        written.append(args.output)
+        rep["seconds"]["save"] = time.perf_counter() - t
+        if args.report:
+            write_json(args.report, rep)
+            written.append(args.report)
+        if args.plot:
+            from .plot import plot_uv
 
-        plot_uv(mesh, uv, args.plot)
+            plot_uv(mesh, uv, args.plot)
+    except BaseException:
+        for path in written:
+            Path(path).unlink(missing_ok=True)
+        raise
     print(f"{args.output}: {rep['vertices']} vertices, {rep['faces']} faces, {rep['flips']} flipped, "
           f"max aspect {rep['max_aspect']:.3g}")
     return EXIT_OK
@@ -258,6 +266,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Functions ``f(subparsers)`` that add further subcommands (points, remeshing, ...).
 _EXTENSIONS: list = [_add_points_commands]
+
+
+def _add_batch_command(sub) -> None:
+    """``jaxparam batch`` (jaxparam/batch.py), handed this module's flatten pipeline."""
+    from .batch import add_parser
+
+    add_parser(sub, add_flatten_options=_add_flatten_options, flatten=flatten_mesh, clean=_clean,
+               prepare=_enable_compile_cache)
+
+
+_EXTENSIONS.append(_add_batch_command)
 
 
 def main(argv=None) -> int:

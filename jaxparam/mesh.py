@@ -344,23 +344,42 @@ def _read_with_trimesh(p: Path, ext: str):
     return V, F
 
 
+def _new_file_mode() -> int:
+    """The permissions ``open()`` would give a new file: ``0o666`` less the umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def atomic_write(path, write_fn, *, mode: str = "w") -> None:
     """Write ``path`` through ``write_fn(file)`` into a temporary file, then rename.
 
-    A failure or Ctrl-C leaves no partial file behind.
+    A failure or Ctrl-C leaves no partial file behind.  An operating-system
+    error (a folder in the way, no permission, a full disk) becomes a
+    :class:`MeshFileError` naming the path.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if path.is_dir():
+            raise IsADirectoryError(21, "is a folder")
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    except OSError as exc:
+        raise MeshFileError(f"{path}: cannot write the file ({exc.strerror or exc}); give a file "
+                            "path in a folder you can write to.") from exc
     try:
         with os.fdopen(fd, mode) as f:
             write_fn(f)
+        os.chmod(tmp, _new_file_mode())     # mkstemp makes 0600; give the usual permissions
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(exc, OSError) and not isinstance(exc, MeshFileError):
+            raise MeshFileError(f"{path}: writing the file failed ({exc.strerror or exc}); nothing "
+                                "was written: check the free space and permissions.") from exc
         raise
 
 

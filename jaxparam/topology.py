@@ -113,7 +113,17 @@ def _rank_linked_lists(succ: np.ndarray, max_len: int):
 
 
 def _raise_edge_error(a, b, hf, n, where):
-    """Explain a bad edge: one shared by more than two faces, or two faces running the same way."""
+    """Explain a bad edge: duplicate faces, an edge shared by more than two faces, or two
+    faces running the same way."""
+    S = np.sort(a.reshape(-1, 3), axis=1)          # a is the face array, flattened
+    _, inv, cnt = np.unique(S, axis=0, return_inverse=True, return_counts=True)
+    dup = np.flatnonzero(cnt[inv.reshape(-1)] > 1)
+    if dup.size:
+        twins = dup[inv.reshape(-1)[dup] == inv.reshape(-1)[dup[0]]]
+        raise NonManifoldError(
+            f"{where}: faces {first_few(dup)} are duplicate faces (faces {int(twins[0])} and "
+            f"{int(twins[1])} both join vertices {tuple(int(v) for v in S[twins[0]])}); remove the "
+            "duplicates (e.g. trimesh's unique_faces).")
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     uniq, counts = np.unique(lo * np.int64(n) + hi, return_counts=True)
     over = np.flatnonzero(counts > 2)

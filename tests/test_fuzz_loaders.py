@@ -39,6 +39,45 @@ def test_bytes_never_crash(tmp_path, ext, data):
     check(tmp_path, f"b.{ext}", data)
 
 
+PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\n"
+            "property float z\nelement face {nf}\nproperty list uchar int vertex_indices\nend_header\n")
+counts = st.sampled_from(["0", "1", "3", "4", "-1", "1e999", "nan", "99999999999", "x", ""])
+
+
+@SETTINGS
+@given(nv=counts, nf=counts, body=lines)
+def test_headers_with_random_counts_never_crash(tmp_path, nv, nf, body):
+    check(tmp_path, "h.ply", (PLY_HEAD.format(nv=nv, nf=nf) + body).encode())
+    check(tmp_path, "h.off", f"OFF\n{nv} {nf} 0\n{body}".encode())
+
+
+@pytest.mark.parametrize("name, data", [
+    ("huge.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty float x\n"
+                 b"property float y\nproperty float z\nend_header\n\x00\x00"),
+    ("huge.off", b"OFF\n4000000000 1 0\n0 0 0\n"),
+])
+def test_huge_counts_are_refused_without_allocating(tmp_path, name, data):
+    p = tmp_path / name
+    p.write_bytes(data)
+    with pytest.raises(MeshFileError, match=r"truncated|unexpected length|cannot read"):
+        jp.load(p)
+
+
+@pytest.mark.parametrize("name, text, cls, match", [
+    ("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", MeshError, r"vertices 0 .*non-finite"),
+    ("rep.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 1\n", MeshError, r"repeat a vertex"),
+    ("bow.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 -1 0\nv -1 0 0\nf 1 2 3\nf 1 4 5\n", MeshError, r"bowtie"),
+])
+def test_well_formed_files_with_invalid_meshes_raise_mesh_errors(tmp_path, name, text, cls, match):
+    """The documented split: a file we can parse but whose mesh is invalid gives a MeshError
+    (never a MeshFileError), so callers can tell a broken file from a broken mesh."""
+    p = tmp_path / name
+    p.write_text(text)
+    with pytest.raises(cls, match=match) as e:
+        jp.load(p)
+    assert not isinstance(e.value, MeshFileError)
+
+
 @SETTINGS
 @given(cut=st.integers(0, 400))
 def test_truncated_valid_files(tmp_path, cut):

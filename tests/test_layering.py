@@ -4,7 +4,7 @@ from pathlib import Path
 
 ORDER = ["errors", "tol", "topology", "mesh", "geometry", "boundary", "weights", "sparse", "linear",
          "metrics", "energies", "optimize", "points", "fitting", "remesh", "wavelets", "manifold",
-         "shapes", "plot", "cli", "demo", "__init__"]
+         "shapes", "plot", "batch", "cli", "demo", "__init__"]
 PKG = Path(__file__).resolve().parents[1] / "jaxparam"
 
 

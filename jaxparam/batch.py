@@ -1,0 +1,288 @@
+"""``jaxparam batch``: flatten every mesh file of a folder, one bad file never stops the rest.
+
+::
+
+    jaxparam batch FOLDER -o OUTFOLDER [flatten options] [--workers N] [--engine local|ray]
+
+Every ``.obj``, ``.off``, ``.ply`` and ``.stl`` file directly inside FOLDER
+(not in sub-folders; hidden files skipped; names in sorted order) goes
+through the same pipeline as ``jaxparam flatten`` and is written as
+``OUTFOLDER/<stem>.obj`` (when two inputs share a stem, e.g. ``a.off`` and
+``a.obj``, both keep their extension: ``a.off.obj``, ``a.obj.obj``).
+``OUTFOLDER/summary.jsonl`` gets one JSON object per input file, in input
+order, with at least ``file``, ``status`` (``"ok"`` or ``"error"``),
+``error`` (the message, or null), ``error_type``, ``output``, the report's
+metrics (``vertices``, ``faces``, ``flips``, ``sym_dirichlet``, ...,
+``holes_filled``), ``seconds`` (the file's wall time) and ``stage_seconds``.
+
+Every file is written to a temporary name and renamed, so an interrupted
+batch leaves only complete outputs; the summary is written last.
+
+Exit codes: 0 every file flattened; 3 at least one input was bad (a
+``MeshError``/``MeshFileError``: the summary says which and why); 4 no bad
+input but a solver failed on at least one file; 1 an unexpected error
+(a bug: the summary keeps its type and message); 2 usage (OUTFOLDER equals
+FOLDER, ``--engine ray`` without ray installed).  A missing FOLDER, or one
+without mesh files, exits 3 without writing anything.
+
+Engines: ``local`` runs the files in this process (``--workers 1``, the
+default) or in a pool of ``N`` processes started with the ``spawn`` method
+(``concurrent.futures``); a worker that dies (a crash, the out-of-memory
+killer) is replaced and the files it may have held are retried one at a
+time, so the one that kills a worker is named in the summary.  ``ray`` runs
+one task per file on a Ray cluster (``ray.init()`` decides which).
+
+This module sits below ``cli`` in the layering: the CLI registers the
+command and hands it the flatten pipeline (:func:`add_parser`), so the two
+commands can never drift apart.
+"""
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import multiprocessing
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+from .errors import JaxparamError, MeshFileError, SolverError
+from .mesh import atomic_write, load, save
+
+__all__ = ["MESH_EXTENSIONS", "find_mesh_files", "output_paths", "flatten_file", "run_batch",
+           "exit_code", "add_parser"]
+
+#: File extensions the batch picks up (case-insensitive).
+MESH_EXTENSIONS = (".obj", ".off", ".ply", ".stl")
+
+#: The CLI's exit codes (cli.py documents them): done, internal error, usage, bad input, solver.
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INPUT, EXIT_SOLVER = 0, 1, 2, 3, 4
+
+SUMMARY = "summary.jsonl"
+
+
+def find_mesh_files(folder) -> list[Path]:
+    """The mesh files directly inside ``folder``, sorted by name.
+
+    Raises :class:`MeshFileError` when ``folder`` is missing, is not a folder
+    or holds no ``.obj``/``.off``/``.ply``/``.stl`` file.
+    """
+    d = Path(folder)
+    if not d.exists():
+        raise MeshFileError(f"batch: {folder}: no such folder.")
+    if not d.is_dir():
+        raise MeshFileError(f"batch: {folder} is a file, not a folder; for one mesh use "
+                            "jaxparam flatten MESH -o OUT.obj.")
+    files = sorted(p for p in d.iterdir()
+                   if p.suffix.lower() in MESH_EXTENSIONS and not p.name.startswith(".")
+                   and not p.is_dir())
+    if not files:
+        raise MeshFileError(f"batch: {folder} holds no mesh files ({', '.join(MESH_EXTENSIONS)}); "
+                            "check the folder.")
+    return files
+
+
+def output_paths(files, outfolder) -> list[Path]:
+    """``OUTFOLDER/<stem>.obj`` for each input; inputs that share a stem keep their extension."""
+    stems = [p.stem for p in files]
+    shared = {s for s in stems if stems.count(s) > 1}
+    out = Path(outfolder)
+    return [out / (f"{p.name}.obj" if p.stem in shared else f"{p.stem}.obj") for p in files]
+
+
+def flatten_file(path, out_path, options: dict, flatten: Callable, clean: Callable) -> dict:
+    """Load, flatten and save one file; never raises for a bad file.
+
+    **Arguments:** ``options`` the flatten options (``weights``, ``boundary``,
+    ``spacing``, ``energy``, ``free_boundary``, ``solver``, ``max_iters``, as
+    ``jaxparam flatten`` parses them); ``flatten(mesh, args, say=...)`` the
+    CLI's pipeline, returning ``(uv, report)``; ``clean`` makes the report
+    JSON-safe.  Both are module-level functions, so they reach a spawned
+    worker by reference.
+
+    **Returns:** the summary record (see the module docstring), with
+    ``exit_code`` 0, 3, 4 or 1 for this file.
+    """
+    t0 = time.perf_counter()
+    rec = {"file": str(path), "status": "error", "error": None, "error_type": None, "output": None}
+    try:
+        mesh = load(path)
+        notes: list = []
+        uv, rep = flatten(mesh, argparse.Namespace(**options), say=notes.append)
+        save(out_path, mesh, uv)
+        rep = dict(rep)
+        rec["stage_seconds"] = rep.pop("seconds", {})
+        rec.update(rep)
+        rec.update(status="ok", output=str(out_path), notes=notes, exit_code=EXIT_OK)
+    except SolverError as exc:
+        rec.update(error=f"solver failed at stage '{exc.stage}': {exc}",
+                   error_type=type(exc).__name__, exit_code=EXIT_SOLVER)
+    except JaxparamError as exc:
+        rec.update(error=str(exc), error_type=type(exc).__name__, exit_code=EXIT_INPUT)
+    except Exception as exc:  # a bug must not stop the batch; the summary keeps it visible
+        rec.update(error=f"internal error: {type(exc).__name__}: {exc}",
+                   error_type=type(exc).__name__, exit_code=EXIT_INTERNAL)
+    rec["seconds"] = time.perf_counter() - t0
+    return clean(rec)
+
+
+def _crash_record(path, message: str) -> dict:
+    return {"file": str(path), "status": "error", "error": message, "error_type": "WorkerDied",
+            "output": None, "exit_code": EXIT_INTERNAL, "seconds": None}
+
+
+def _run_pool(jobs, workers: int, report, prepare) -> None:
+    """Run ``jobs`` (``(index, args)``) in a spawn-started process pool.
+
+    A dead worker breaks the whole pool, and with several workers it is not
+    known which file killed it: the files left unfinished are then retried in
+    a one-worker pool, one at a time, and a file that kills that worker too
+    gets a ``WorkerDied`` record.
+    """
+    ctx = multiprocessing.get_context("spawn")
+    suspects = []
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=prepare) as pool:
+        futures = {pool.submit(flatten_file, *args): (i, args) for i, args in jobs}
+        for fut in cf.as_completed(futures):
+            i, args = futures[fut]
+            try:
+                report(i, fut.result())
+            except cf.process.BrokenProcessPool:
+                suspects.append((i, args))
+    pool = None
+    try:
+        for i, args in sorted(suspects, key=lambda j: j[0]):
+            if pool is None:
+                pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=prepare)
+            try:
+                report(i, pool.submit(flatten_file, *args).result())
+            except cf.process.BrokenProcessPool:
+                pool.shutdown(wait=False)
+                pool = None
+                report(i, _crash_record(args[0], "the worker process died while flattening this "
+                                                 "file (a crash, or killed for memory); try it "
+                                                 "alone with jaxparam flatten"))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+
+
+def _run_ray(jobs, report) -> None:
+    """One Ray task per file; ``ray.init()`` connects to a running cluster or starts a local one."""
+    import ray
+
+    ray.init(ignore_reinit_error=True)
+    task = ray.remote(flatten_file)
+    refs = {task.remote(*args): i for i, args in jobs}
+    pending = list(refs)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        for ref in done:
+            report(refs[ref], ray.get(ref))
+
+
+def run_batch(files, outputs, options: dict, *, flatten: Callable, clean: Callable,
+              workers: int = 1, engine: str = "local", prepare: Callable | None = None,
+              say=print) -> list[dict]:
+    """Flatten ``files`` into ``outputs`` (same length); returns the records in input order.
+
+    ``say`` receives one progress line per finished file; ``prepare()`` runs
+    once in each process that flattens (the CLI enables JAX's persistent
+    compilation cache there).  See :func:`flatten_file` for ``options``,
+    ``flatten`` and ``clean``.
+    """
+    jobs = [(i, (str(f), str(o), options, flatten, clean)) for i, (f, o) in enumerate(zip(files, outputs))]
+    records: list = [None] * len(jobs)
+    done = [0]
+
+    def report(i, rec):
+        records[i] = rec
+        done[0] += 1
+        state = "ok" if rec["status"] == "ok" else f"error: {rec['error']}"
+        say(f"[{done[0]}/{len(jobs)}] {Path(rec['file']).name}: {state}")
+
+    if engine == "ray":
+        _run_ray(jobs, report)
+    elif workers <= 1:
+        if prepare is not None:
+            prepare()
+        for i, args in jobs:
+            report(i, flatten_file(*args))
+    else:
+        _run_pool(jobs, workers, report, prepare)
+    return records
+
+
+def exit_code(records) -> int:
+    """0 if every file is ok; otherwise 3 if any input was bad, else 4 for a solver failure, else 1."""
+    codes = {r.get("exit_code", EXIT_INTERNAL) for r in records}
+    for code in (EXIT_INPUT, EXIT_SOLVER, EXIT_INTERNAL):
+        if code in codes:
+            return code
+    return EXIT_OK
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--workers must be a positive integer, got {text!r}")
+    return value
+
+
+def _flatten_options(args) -> dict:
+    return {k: getattr(args, k) for k in ("weights", "boundary", "spacing", "energy",
+                                          "free_boundary", "solver", "max_iters")}
+
+
+def _cmd_batch(args, *, flatten: Callable, clean: Callable, prepare: Callable | None) -> int:
+    def err(msg):
+        print(f"jaxparam batch: {msg}", file=sys.stderr)
+
+    if args.engine == "ray":
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            err("--engine ray needs the 'ray' package, which is not installed (pip install ray); "
+                "use --engine local --workers N for a process pool on this machine.")
+            return EXIT_USAGE
+    files = find_mesh_files(args.folder)
+    out = Path(args.output)
+    if out.resolve() == Path(args.folder).resolve():
+        err(f"the output folder {args.output} is the input folder; the results would overwrite "
+            "the inputs: give another -o folder.")
+        return EXIT_USAGE
+    if out.exists() and not out.is_dir():
+        raise MeshFileError(f"batch: {args.output} is a file, not a folder; give a folder to -o.")
+    outputs = output_paths(files, out)
+    t = time.perf_counter()
+    records = run_batch(files, outputs, _flatten_options(args), flatten=flatten, clean=clean,
+                        workers=args.workers, engine=args.engine, prepare=prepare,
+                        say=lambda m: print(m, file=sys.stderr))
+    atomic_write(out / SUMMARY, lambda f: f.writelines(json.dumps(r) + "\n" for r in records))
+    ok = sum(r["status"] == "ok" for r in records)
+    print(f"{out / SUMMARY}: {ok} of {len(records)} files flattened "
+          f"({time.perf_counter() - t:.1f} s)")
+    return exit_code(records)
+
+
+def add_parser(sub, *, add_flatten_options: Callable, flatten: Callable, clean: Callable,
+               prepare: Callable | None = None) -> None:
+    """Add ``batch`` to the CLI's subparsers.
+
+    **Arguments:** ``add_flatten_options(parser)`` adds the flatten options;
+    ``flatten`` and ``clean`` as in :func:`flatten_file` (the CLI's own
+    ``flatten_mesh`` and ``_clean``); ``prepare`` as in :func:`run_batch`.
+    """
+    p = sub.add_parser("batch", help="flatten every mesh file of a folder",
+                       description=__doc__.split("\n")[0])
+    p.add_argument("folder")
+    p.add_argument("-o", "--output", required=True, help="the output folder (created if needed)")
+    add_flatten_options(p)
+    p.add_argument("--workers", type=_positive_int, default=1,
+                   help="processes working in parallel (default 1: this process)")
+    p.add_argument("--engine", choices=["local", "ray"], default="local")
+    p.set_defaults(func=lambda args: _cmd_batch(args, flatten=flatten, clean=clean, prepare=prepare))
