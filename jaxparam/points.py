@@ -199,8 +199,8 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
                               "increase k or radius.")
     # PCA normal of each neighbourhood (the point and its neighbours).
     D = P[indices] - P[rows]
-    C = np.zeros((N, 3, 3))
-    np.add.at(C, rows, D[:, :, None] * D[:, None, :])
+    # Rows are contiguous in CSR order and every point has >= 2 neighbours: reduceat sums them.
+    C = np.add.reduceat(D[:, :, None] * D[:, None, :], indptr[:-1], axis=0)
     _, vecs = np.linalg.eigh(C)
     normal = vecs[:, :, 0]
     # Orient normals consistently with the global best-fit plane's normal.
@@ -217,8 +217,7 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     nxt = np.where(nxt >= end, indptr[rows], nxt)
     gaps = np.mod(ang[nxt] - ang, 2 * np.pi)
     gaps = np.where(deg[rows] == 1, 2 * np.pi, gaps)
-    gap = np.zeros(N)
-    np.maximum.at(gap, rows, gaps)
+    gap = np.maximum.reduceat(gaps, indptr[:-1])
     spacing = np.bincount(rows, weights=np.linalg.norm(D[order], axis=1), minlength=N) / deg
     return PointGraph(indptr, indices, gap, normal, spacing)
 
