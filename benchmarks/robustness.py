@@ -40,7 +40,8 @@ def run(n: int, weights: str) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=1000)
-    ap.add_argument("--weights", nargs="*", default=["shape_preserving", "mean_value", "harmonic"])
+    ap.add_argument("--weights", nargs="*", default=["uniform", "inverse_distance", "shape_preserving",
+                                                    "mean_value", "harmonic"])
     ap.add_argument("--one", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:

@@ -98,9 +98,10 @@ def flatten_mesh(mesh, args, *, say=print):
     """Run the flatten pipeline on a loaded mesh; returns ``(uv, report)``."""
     import numpy as np
 
-    from .linear import convex_map
+    from .linear import convex_map, disk_check
 
     seconds = {}
+    disk_check(mesh, "convex_map")      # before the holes note: no note for a mesh refused anyway
     holes = max(0, len(mesh.topology.boundary_loops) - 1)
     extra = {"weights": args.weights, "boundary": args.boundary, "spacing": args.spacing,
              "holes_filled": holes}

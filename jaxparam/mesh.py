@@ -328,6 +328,8 @@ def load(path, *, validate: bool = True) -> TriMesh:
 def _read_with_trimesh(p: Path, ext: str):
     if not p.exists():
         raise MeshFileError(f"{p}: no such file.")
+    if p.is_dir():
+        raise MeshFileError(f"{p}: is a folder, not a mesh file.")
     if p.stat().st_size == 0:
         raise MeshFileError(f"{p}: the file is empty.")
     try:

@@ -1,6 +1,9 @@
 """The catalogue of bad inputs (docs/errors.md): each gets our own error, naming what and where."""
+import json
+
 import numpy as np
 import pytest
+from conftest import data_path
 
 import jaxparam as jp
 from jaxparam.cli import main
@@ -18,7 +21,8 @@ TRI = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
     (TRI, [[0, -1, 2]], MeshError, r"faces 0 .*outside"),
     (TRI, [[0, 1, 1]], DegenerateFaceError, r"faces 0 .*repeat a vertex"),
     (np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), [[0, 1, 2]], DegenerateFaceError, r"zero area"),
-    (TRI, [[0, 1, 2], [0, 1, 2]], NonManifoldError, r"duplicate faces"),
+    (TRI, [[0, 1, 2], [0, 1, 2]], NonManifoldError, r"faces 0, 1 .*duplicate faces .*\(0, 1, 2\)"),
+    (TRI, [[0, 1, 2], [1, 3, 2], [2, 1, 0]], NonManifoldError, r"faces 0, 2 .*duplicate faces"),
     (np.vstack([TRI, [[0.5, -1, 0]]]), [[0, 1, 2], [1, 0, 3], [0, 1, 4]], NonManifoldError,
      r"edges \(0, 1\) .*more than two faces"),
     (np.vstack([TRI, [[-1, -1, 0], [-1, 0, 0]]]), [[0, 1, 2], [0, 4, 5]], NonManifoldError,
@@ -87,13 +91,13 @@ def test_user_weights_of_wrong_sign(grid_mesh):
 
 
 @pytest.mark.parametrize("name, content, match", [
-    ("trunc.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", r"line 4"),
-    ("counts.off", b"OFF\n5 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", r"truncated|counts"),
-    ("junk.obj", bytes(range(256)) * 4, r"binary"),
-    ("empty.off", b"", r"empty"),
+    ("trunc.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", r"line 4: index 4 .*only 3"),
+    ("counts.off", b"OFF\n5 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", r"promises 5 vertices and 2 faces .*truncated"),
+    ("junk.obj", bytes(range(256)) * 4, r"looks binary"),
+    ("empty.off", b"", r": the file is empty"),
     ("noface.obj", b"v 0 0 0\nv 1 0 0\n", r"no faces"),
     ("badnum.obj", b"v 0 0 x\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", r"line 1.*'x'"),
-    ("junk.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n", r".ply|PLY|read"),
+    ("junk.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n", r"cannot read the file as \.ply \(.+\); check the format"),
 ])
 def test_malformed_files(tmp_path, name, content, match):
     p = tmp_path / name
@@ -108,8 +112,10 @@ def test_malformed_files(tmp_path, name, content, match):
 def test_missing_file_and_folder(tmp_path, capsys):
     with pytest.raises(MeshFileError, match="no such file"):
         jp.load(tmp_path / "nope.off")
-    with pytest.raises(MeshFileError, match="folder"):
-        jp.load(tmp_path)
+    (tmp_path / "d.off").mkdir()
+    for folder in [tmp_path, tmp_path / "d.off"]:          # no extension (trimesh route), .off
+        with pytest.raises(MeshFileError, match=r": is a folder, not a mesh file"):
+            jp.load(folder)
     assert main(["info", str(tmp_path / "nope.off")]) == 3
     assert "no such file" in capsys.readouterr().err
 
@@ -119,3 +125,71 @@ def test_cli_exit_codes_for_bad_meshes(tmp_path, capsys):
     p.write_text("OFF\n5 2 0\n0 0 0\n1 0 0\n0 1 0\n-1 -1 0\n-1 0 0\n3 0 1 2\n3 0 3 4\n")
     assert main(["flatten", str(p), "-o", str(tmp_path / "o.obj")]) == 3
     assert "bowtie" in capsys.readouterr().err
+
+
+@pytest.mark.data
+def test_halftunnel_holes_filled_no_flips_for_every_positive_weight(tmp_path):
+    """Several boundary loops: the longest goes to the circle, the other two are filled virtually."""
+    path = data_path("meshes", "halftunnel.off")
+    mesh = jp.load(path)
+    assert [len(l) for l in mesh.topology.boundary_loops] == [48, 32, 16]
+    for kind in ["uniform", "inverse_distance", "shape_preserving", "mean_value"]:
+        uv = np.asarray(jp.convex_map(mesh, weights=kind))
+        rep = jp.distortion(mesh, uv, weights=kind)
+        assert rep.flips == 0 and np.isfinite(uv).all(), kind
+        assert rep.theorem1.holds, kind
+    out, rep = tmp_path / "h.obj", tmp_path / "h.json"
+    assert main(["flatten", str(path), "-o", str(out), "--report", str(rep)]) == 0
+    r = json.loads(rep.read_text())
+    assert r["holes_filled"] == 2 and r["flips"] == 0
+
+
+def test_holes_filled_key_is_always_in_the_report(tmp_path):
+    p, rep = tmp_path / "g.obj", tmp_path / "r.json"
+    jp.save(p, jp.shapes.graph_surface(6))
+    assert main(["flatten", str(p), "-o", str(tmp_path / "o.obj"), "--report", str(rep)]) == 0
+    assert json.loads(rep.read_text())["holes_filled"] == 0
+
+
+def write_off(path, V, F):
+    path.write_text(f"OFF\n{len(V)} {len(F)} 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in V)
+                    + "".join(f"3 {a} {b} {c}\n" for a, b, c in F))
+
+
+@pytest.mark.parametrize("name, V, F, match", [
+    ("nan.off", [[0, 0, "nan"], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], r"vertices 0 .*non-finite"),
+    ("flat.off", [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], r"faces 0 .*zero area"),
+    ("dup.off", TRI.tolist(), [[0, 1, 2], [0, 1, 2]], r"duplicate faces"),
+    ("edge3.off", np.vstack([TRI, [[0.5, -1, 0]]]).tolist(), [[0, 1, 2], [1, 0, 3], [0, 1, 4]],
+     r"edges \(0, 1\) .*more than two faces"),
+    ("orient.off", TRI.tolist(), [[0, 1, 2], [1, 2, 3]], r"inconsistent"),
+    ("two.off", np.vstack([TRI, TRI + 5]).tolist(), [[0, 1, 2], [1, 3, 2], [4, 5, 6], [5, 7, 6]],
+     r"2 connected components"),
+    ("closed.off", np.asarray(jp.shapes.sphere(0).vertices).tolist(), jp.shapes.sphere(0).faces.tolist(),
+     r"closed \(no boundary"),
+])
+def test_cli_exit_3_names_the_problem(tmp_path, capsys, name, V, F, match):
+    p = tmp_path / name
+    write_off(p, V, F)
+    out = tmp_path / "o.obj"
+    assert main(["flatten", str(p), "-o", str(out), "--report", str(tmp_path / "r.json")]) == 3
+    err = capsys.readouterr().err
+    assert err.startswith("jaxparam flatten: ") and len(err.strip().splitlines()) == 1
+    import re
+    assert re.search(match, err), err
+    assert list(tmp_path.iterdir()) == [p]                 # nothing written
+
+
+def test_cli_exit_3_for_an_unwritable_output_and_for_points(tmp_path, capsys):
+    p = tmp_path / "g.obj"
+    jp.save(p, jp.shapes.graph_surface(5))
+    (tmp_path / "taken").mkdir()
+    assert main(["flatten", str(p), "-o", str(tmp_path / "taken")]) == 3
+    assert "is a folder" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "taken")]) == 3
+    assert "is a folder, not a mesh file" in capsys.readouterr().err
+    pts = tmp_path / "few.xyz"
+    pts.write_text("0 0 0\n1 0 0\n0 1 0\n")
+    assert main(["meshless", str(pts), "-o", str(tmp_path / "m.obj")]) == 3
+    assert "too few" in capsys.readouterr().err
+    assert not (tmp_path / "m.obj").exists()

@@ -32,7 +32,7 @@ def test_text_never_crashes(tmp_path, ext, text):
     check(tmp_path, f"f.{ext}", text.encode())
 
 
-@pytest.mark.parametrize("ext", ["obj", "off", "ply"])
+@pytest.mark.parametrize("ext", ["obj", "off", "ply", "stl"])
 @SETTINGS
 @given(data=st.binary(max_size=300))
 def test_bytes_never_crash(tmp_path, ext, data):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import jaxparam as jp
-from jaxparam.errors import DegenerateFaceError
+from jaxparam.errors import DegenerateFaceError, MeshFileError
 
 
 def sliver_mesh(eps: float) -> jp.TriMesh:
@@ -74,3 +74,48 @@ def test_interrupted_write_leaves_no_file(tmp_path, grid_mesh, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         jp.save(target, grid_mesh, np.zeros((grid_mesh.n_vertices, 2)))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_failure_midway_keeps_the_old_file_and_leaves_no_temporary(tmp_path, grid_mesh, monkeypatch):
+    target = tmp_path / "out.obj"
+    target.write_text("old content")
+    real, calls = np.savetxt, []
+
+    def disk_full_on_second_block(f, *a, **k):      # the vertices are written, then the disk fills
+        calls.append(1)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        return real(f, *a, **k)
+
+    monkeypatch.setattr(np, "savetxt", disk_full_on_second_block)
+    with pytest.raises(MeshFileError, match=r"out.obj: writing the file failed \(No space left"):
+        jp.save(target, grid_mesh, np.zeros((grid_mesh.n_vertices, 2)))
+    assert len(calls) == 2
+    assert target.read_text() == "old content" and list(tmp_path.iterdir()) == [target]
+
+
+def test_json_report_is_all_or_nothing(tmp_path):
+    from jaxparam.cli import write_json
+
+    with pytest.raises(TypeError):
+        write_json(tmp_path / "r.json", {"a": 1.0, "b": object()})     # fails mid-dump
+    assert list(tmp_path.iterdir()) == []
+    write_json(tmp_path / "r.json", {"a": float("nan"), "b": np.float64(2)})
+    assert (tmp_path / "r.json").read_text().replace(" ", "").replace("\n", "") == '{"a":null,"b":2.0}'
+    assert oct((tmp_path / "r.json").stat().st_mode & 0o777) != oct(0o600)   # usual permissions
+
+
+@pytest.mark.parametrize("exc, code", [(KeyboardInterrupt, 130), (MeshFileError("r.json: boom"), 3)])
+def test_cli_flatten_writes_nothing_when_a_late_stage_fails(tmp_path, monkeypatch, exc, code):
+    import jaxparam.cli as cli
+
+    src = tmp_path / "in.obj"
+    jp.save(src, jp.shapes.graph_surface(5))
+
+    def fail(*a, **k):
+        raise exc
+
+    monkeypatch.setattr(cli, "write_json", fail)        # the mesh is saved, then the report fails
+    out, rep = tmp_path / "out.obj", tmp_path / "r.json"
+    assert cli.main(["flatten", str(src), "-o", str(out), "--report", str(rep)]) == code
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.obj"]
