@@ -185,7 +185,10 @@ class _PardisoHandle:
 
     def factor(self, owner, values):
         vals = np.ascontiguousarray(values if self.take is None else values[self.take], np.float64)
-        if not self.analyzed:
+        # The unsymmetric analysis also computes the scaling and matching from the values, so it
+        # is redone for every matrix (results then depend on the input alone, bit for bit); the
+        # symmetric positive definite analysis depends on the pattern only and is reused.
+        if not self.analyzed or self.mtype == 11:
             self.call(11, vals)
             self.analyzed = True
             stats["analyses"] += 1
