@@ -44,6 +44,7 @@ import json
 import multiprocessing
 import sys
 import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Callable
 
@@ -148,7 +149,7 @@ def _run_pool(jobs, workers: int, report, prepare) -> None:
             i, args = futures[fut]
             try:
                 report(i, fut.result())
-            except cf.process.BrokenProcessPool:
+            except BrokenProcessPool:
                 suspects.append((i, args))
     pool = None
     try:
@@ -157,7 +158,7 @@ def _run_pool(jobs, workers: int, report, prepare) -> None:
                 pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=prepare)
             try:
                 report(i, pool.submit(flatten_file, *args).result())
-            except cf.process.BrokenProcessPool:
+            except BrokenProcessPool:
                 pool.shutdown(wait=False)
                 pool = None
                 report(i, _crash_record(args[0], "the worker process died while flattening this "
@@ -278,7 +279,10 @@ def add_parser(sub, *, add_flatten_options: Callable, flatten: Callable, clean: 
     ``flatten_mesh`` and ``_clean``); ``prepare`` as in :func:`run_batch`.
     """
     p = sub.add_parser("batch", help="flatten every mesh file of a folder",
-                       description=__doc__.split("\n")[0])
+                       description="Flatten every .obj/.off/.ply/.stl file of FOLDER into "
+                                   "OUTFOLDER/<stem>.obj; one bad file never stops the rest, "
+                                   "OUTFOLDER/summary.jsonl says which and why. Exit 0 all ok, "
+                                   "3 some input bad, 4 a solver failed.")
     p.add_argument("folder")
     p.add_argument("-o", "--output", required=True, help="the output folder (created if needed)")
     add_flatten_options(p)

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import tol
-from .errors import MeshError
+from .errors import MeshError, first_few
 from .geometry import safe_norm
 
 __all__ = [
@@ -58,8 +58,8 @@ def polygon(loop_xyz, corners_uv, *, spacing: str = "chord", corner_positions=No
         raise MeshError(f"boundary polygon: corners must have shape (q, 2) with q >= 3, got {C.shape}.")
     if not is_convex_polygon(C):
         raise MeshError("boundary polygon: the corners do not form a convex counter-clockwise "
-                        "polygon; Theorem 1 needs a convex boundary: reorder the corners "
-                        "counter-clockwise or use their convex hull.")
+                        f"polygon ({_why_not_convex(C)}); Theorem 1 needs a convex boundary: "
+                        "reorder the corners counter-clockwise or use their convex hull.")
     edges = np.roll(C, -1, axis=0) - C
     seglen = np.linalg.norm(edges, axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seglen)]) / seglen.sum()    # corner parameters
@@ -137,6 +137,23 @@ def boundary_uv(loop_xyz, shape="circle", *, spacing: str = "chord", corners=Non
         raise MeshError(f"boundary: the user boundary UVs must have shape ({k}, 2), one row per "
                         f"boundary-loop vertex in loop order, got {tuple(uv.shape)}.")
     return uv
+
+
+def _why_not_convex(P) -> str:
+    """Name what makes the polygon ``P: (k, 2)`` not convex and counter-clockwise (for messages)."""
+    d = np.roll(P, -1, axis=0) - P
+    same = np.flatnonzero(np.linalg.norm(d, axis=1) == 0)
+    if same.size:
+        return f"corners {int(same[0])} and {(int(same[0]) + 1) % len(P)} coincide"
+    dn = np.roll(d, -1, axis=0)
+    cross = d[:, 0] * dn[:, 1] - d[:, 1] * dn[:, 0]
+    sin = cross / (np.linalg.norm(d, axis=1) * np.linalg.norm(dn, axis=1))
+    cw = (np.flatnonzero(sin <= -tol.CONVEX_SIN) + 1) % len(P)
+    if cw.size == len(P):
+        return "the corners run clockwise"
+    if cw.size:
+        return f"it turns clockwise at corners {first_few(np.sort(cw))}"
+    return "it winds around more than once"
 
 
 def is_convex_polygon(P, *, strict: bool = False) -> bool:

@@ -121,6 +121,19 @@ def solve_interior(topology, w, boundary_uv, *, symmetric: bool = False, backend
     return sparse.solve(S.pattern, vals, rhs, symmetric=symmetric, backend=backend)
 
 
+def _solve(pattern, vals, rhs, symmetric: bool, backend: str):
+    """:func:`jaxparam.sparse.solve`, run straight on the host when nothing is traced.
+
+    Inside ``jax.pure_callback`` a :class:`SolverError` reaches the caller wrapped in
+    JAX's runtime error; called directly it stays itself (so the CLI exits with 4 and
+    the stage).  Under ``jit``/``grad`` the differentiable route is taken.
+    """
+    if isinstance(vals, jax.core.Tracer) or isinstance(rhs, jax.core.Tracer):
+        return sparse.solve(pattern, vals, rhs, symmetric=symmetric, backend=backend)
+    fac = sparse.factorize(pattern, np.asarray(vals), symmetric=symmetric, backend=backend)
+    return fac.solve(np.asarray(rhs, np.float64))
+
+
 def disk_check(mesh: TriMesh, where: str) -> None:
     """Raise :class:`TopologyError` unless the mesh is one connected surface with a boundary."""
     t = mesh.topology
@@ -217,7 +230,7 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, boundary, spacing, corners, 
         w, V, loop, t.slot[loop], user_uv, R.row, S.ii_entries, S.ib_entries, S.bd_slot, S.ib_row,
         S.diag_pos, S.off_pos, shape=shape, spacing=spacing, corners=corners, ni=R.n_rows,
         nnz=S.pattern.nnz, nb=t.boundary.size)
-    x = sparse.solve(S.pattern, vals, rhs, symmetric=symmetric, backend=backend)
+    x = _solve(S.pattern, vals, rhs, symmetric, backend)
     uv = _scatter(x, uv_b, t.interior, t.boundary, n=t.n_vertices)
     return uv[: mesh.n_vertices] if added else uv
 
@@ -254,7 +267,11 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
     symmetric = weights in wts.SYMMETRIC_KINDS
 
     def w_of(work):
-        return wts.entry_weights(work.vertices, work.topology, weights)[0]
+        w = wts.entry_weights(work.vertices, work.topology, weights)[0]
+        # Unit row sums (eq. (3)'s lambdas) keep the system well scaled when one weight is huge
+        # (a nearly flat angle makes mean-value weights ~1/angle); spring weights stay as they are,
+        # symmetric for Cholesky.
+        return w if symmetric else wts.normalize(w, work.topology)
 
     return _map_with(mesh, w_of, symmetric, boundary, spacing, corners, backend, "convex_map")
 

@@ -1,5 +1,6 @@
 """The catalogue of bad inputs (docs/errors.md): each gets our own error, naming what and where."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -60,6 +61,16 @@ def test_topology_errors_for_disk_methods():
                      np.vstack([a.faces, a.faces + 9]))
     with pytest.raises(TopologyError, match=r"2 connected components .*split"):
         jp.convex_map(two)
+    torus = jp.shapes.torus(8, 6)
+    with pytest.raises(TopologyError, match=r"genus 1 with 1 boundary loops.*cut the handles"):
+        jp.convex_map(jp.TriMesh(torus.vertices, torus.faces[1:]))
+
+
+def test_minimize_refuses_a_flipped_start(grid_mesh):
+    uv = np.asarray(jp.convex_map(grid_mesh)) * np.array([1.0, -1.0])
+    with pytest.raises(jp.SolverError, match=r"not injective: \d+ of \d+ triangles .*first: face 0.*convex_map") as e:
+        jp.minimize(grid_mesh, "mips", init=uv)
+    assert e.value.stage == "init" and isinstance(e.value, RuntimeError)
 
 
 def test_several_boundary_loops_documented_fill(grid_mesh):
@@ -74,8 +85,14 @@ def test_user_boundary_errors(grid_mesh):
     k = len(grid_mesh.topology.boundary_loops[0])
     with pytest.raises(MeshError, match=rf"shape \({k}, 2\)"):
         jp.convex_map(grid_mesh, boundary=np.zeros((k - 1, 2)))
-    with pytest.raises(MeshError, match=r"not form a convex"):
+    with pytest.raises(MeshError, match=r"not form a convex .*turns clockwise at corners 1 .*convex hull"):
         jp.convex_map(grid_mesh, boundary={"polygon": [[0, 0], [1, 1], [2, 0], [1, 3]]})
+    with pytest.raises(MeshError, match=r"the corners run clockwise"):
+        jp.convex_map(grid_mesh, boundary={"polygon": [[0, 0], [0, 1], [1, 1], [1, 0]]})
+    with pytest.raises(MeshError, match=r"corners 1 and 2 coincide"):
+        jp.convex_map(grid_mesh, boundary={"polygon": [[0, 0], [1, 0], [1, 0], [0, 1]]})
+    with pytest.raises(MeshError, match=r"unknown weights 'cot'; use one of"):
+        jp.convex_map(grid_mesh, weights="cot")
     with pytest.raises(MeshError, match=r"unknown boundary 'disc'"):
         jp.convex_map(grid_mesh, boundary="disc")
     with pytest.raises(MeshError, match=r"unknown spacing"):
@@ -175,7 +192,6 @@ def test_cli_exit_3_names_the_problem(tmp_path, capsys, name, V, F, match):
     assert main(["flatten", str(p), "-o", str(out), "--report", str(tmp_path / "r.json")]) == 3
     err = capsys.readouterr().err
     assert err.startswith("jaxparam flatten: ") and len(err.strip().splitlines()) == 1
-    import re
     assert re.search(match, err), err
     assert list(tmp_path.iterdir()) == [p]                 # nothing written
 
