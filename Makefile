@@ -11,7 +11,7 @@ PIP := $(VENV)/bin/pip
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
-	$(PIP) install --quiet -e ".[test,peers]"
+	$(PIP) install --quiet -e ".[test,peers,fast]"
 	touch $@
 
 venv: $(VENV)/.installed

@@ -209,7 +209,9 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     e1 = vecs[:, :, 2]
     e2 = np.cross(normal, e1)
     ang = np.arctan2(np.einsum("ij,ij->i", D, e2[rows]), np.einsum("ij,ij->i", D, e1[rows]))
-    order = np.lexsort((ang, rows))
+    # One sort on a combined key (row, then angle): ang + pi lies in [0, 2 pi] < 8, and the key
+    # stays exact to ~2e-9 rad up to 10^8 points; np.lexsort on two keys is 4x slower.
+    order = np.argsort(rows * 8.0 + (ang + np.pi))
     indices, ang = indices[order], ang[order]
     # Largest angular gap per point (including the wrap-around one).
     nxt = np.arange(indices.size) + 1
@@ -220,6 +222,21 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     gap = np.maximum.reduceat(gaps, indptr[:-1])
     spacing = np.bincount(rows, weights=np.linalg.norm(D[order], axis=1), minlength=N) / deg
     return PointGraph(indptr, indices, gap, normal, spacing)
+
+
+def _knn_gaps(P: np.ndarray, k: int):
+    """Largest angular gap (radians) of each point's ``k`` nearest neighbours projected on
+    their PCA plane, and the mean neighbour distance; ``(N,), (N,)``.  Dense ``(N, k)``
+    arrays: every point has exactly ``k`` neighbours here, so no CSR bookkeeping."""
+    dist, idx = cKDTree(P).query(P, k + 1, workers=-1)
+    D = P[idx[:, 1:]] - P[:, None, :]                       # (N, k, 3)
+    _, vecs = np.linalg.eigh(np.matmul(D.transpose(0, 2, 1), D))
+    e1 = vecs[:, :, 2]
+    e2 = np.cross(vecs[:, :, 0], e1)
+    ang = np.arctan2(np.matmul(D, e2[:, :, None])[..., 0], np.matmul(D, e1[:, :, None])[..., 0])
+    ang.sort(axis=1)
+    gaps = np.diff(ang, axis=1, append=ang[:, :1] + 2 * np.pi)
+    return gaps.max(1), dist[:, 1:].mean(1)
 
 
 def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7 * np.pi,
@@ -235,8 +252,8 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7
     candidates drop out) and ordered along the longest path of that tree.
     """
     P = np.asarray(points, np.float64)
-    det = point_graph(P, min(k_detect, P.shape[0] - 1), symmetric=False)
-    cand = np.flatnonzero(det.gap > gap)
+    det_gap, det_spacing = _knn_gaps(P, min(k_detect, P.shape[0] - 1))
+    cand = np.flatnonzero(det_gap > gap)
     if cand.size < 3:
         raise PointCloudError(f"meshless_map: found {cand.size} boundary points (largest angular gap "
                               f"> {gap:.2f} rad); the points may sample a closed surface. Pass "
@@ -244,7 +261,7 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7
     Q = P[cand]
     kk = min(8, cand.size - 1)
     dist, idx = cKDTree(Q).query(Q, kk + 1)
-    link = 3.0 * np.median(det.spacing[cand])
+    link = 3.0 * np.median(det_spacing[cand])
     rows = np.repeat(np.arange(cand.size), kk)
     d = dist[:, 1:].reshape(-1)
     ok = d <= link
@@ -455,13 +472,18 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
 # Reconstruction
 # ------------------------------------------------------------------------------------------
 
-def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> TriMesh:
+def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int = 100,
+                        **options) -> TriMesh:
     """Triangulate unorganized points through their meshless parameterization (§8).
 
     The meshless map uses shape-preserving weights unless ``weights`` says
     otherwise (on camelhead.xyz they recover 79 % of the source mesh's edges,
     inverse distance 68 %).  Delaunay triangulation of the parameter points,
-    lifted to 3D; triangles on
+    lifted to 3D, then made closer to a Delaunay triangulation *in 3D*: an
+    interior edge whose two opposite 3D angles sum to more than pi is flipped
+    when both new triangles keep a positive area in the parameter plane (so the
+    UVs stay one-to-one), for at most ``flip_rounds`` rounds of independent
+    flips (0 turns this off).  Triangles on
     the outside whose longest 3D edge exceeds ``bridge_factor`` times the local
     point spacing (they bridge concave parts of the boundary) are peeled off
     repeatedly, and the largest manifold disk is kept.
@@ -480,11 +502,9 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> Tri
                         symmetric=options.get("symmetric", True))
     uv, bnd = meshless_map(P, graph=graph, **options)
     U = np.asarray(uv)
-    F = Delaunay(U).simplices.astype(np.int64)
-    a, b = U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]]
-    neg = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] < 0
-    F[neg] = F[neg][:, [0, 2, 1]]
-    F = F[np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0]
+    F = _delaunay(U)
+    if flip_rounds:
+        F = _flip_towards_3d_delaunay(F, P, U, flip_rounds)
     L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
     local = graph.spacing[F].mean(1)
     too_long = L.max(1) > bridge_factor * local
@@ -496,6 +516,105 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, **options) -> Tri
     mesh = TriMesh(V if kept.size == n_in else P, F, uv=U, validate=False, name="reconstruction")
     mesh.boundary_points = bnd
     return mesh
+
+
+def _delaunay(U: np.ndarray) -> np.ndarray:
+    """Delaunay triangles ``(m, 3)`` of planar points ``(N, 2)``, anticlockwise, no zero-area
+    ones.  Shewchuk's Triangle (the optional ``triangle`` package: 1M points in about 1 s)
+    when it is installed, else SciPy's Qhull (about 13 s for 1M points)."""
+    try:
+        import triangle
+    except ImportError:
+        triangle = None
+    if triangle is not None:
+        F = np.asarray(triangle.triangulate({"vertices": np.array(U, np.float64)}, "Qz")["triangles"], np.int64)
+    else:
+        F = Delaunay(U).simplices.astype(np.int64)
+    cross = _orient(U, F[:, 0], F[:, 1], F[:, 2])
+    F[cross < 0] = F[cross < 0][:, [0, 2, 1]]
+    return F[cross != 0]
+
+
+def _orient(U, a, b, c):
+    """Twice the signed area of the planar triangles ``(a, b, c)``."""
+    u, v = U[b] - U[a], U[c] - U[a]
+    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+
+def _corner_angle(P, at, u, v):
+    """3D angle at ``at`` between the directions to ``u`` and ``v`` (radians)."""
+    x, y = P[u] - P[at], P[v] - P[at]
+    return np.arctan2(np.linalg.norm(np.cross(x, y), axis=1), np.einsum("ij,ij->i", x, y))
+
+
+def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int) -> np.ndarray:
+    """Flip interior edges ``a-b`` (faces ``(a, b, c)``, ``(b, a, d)``) whose opposite 3D angles
+    at ``c`` and ``d`` sum to more than pi, and to more than the new diagonal's, into
+    ``(a, d, c)``, ``(d, b, c)``, when both new faces keep a positive parameter-plane area.
+    The planar embedding is kept, so the result still triangulates the same points one-to-one
+    in the plane.
+
+    Half-edge ``h = 3 f + j`` runs from ``F[f, j]`` to ``F[f, j+1]``; ``twin`` is kept up to
+    date through the flips, so after the first round only the edges of flipped faces (and
+    candidates that lost a conflict) are looked at again.  Each round flips an independent set:
+    a flip claims its two faces and their (up to four) neighbours, the largest excess angle
+    first, so no two flips of a round touch the same twins."""
+    F = np.array(F, np.int64)
+    m = len(F)
+    Ff = F.reshape(-1)                      # a view: writes to F show here
+    dst = F[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(Ff, dst) * np.int64(len(P)) + np.maximum(Ff, dst)
+    order = np.argsort(key)
+    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+    twin = np.full(3 * m, -1, np.int64)
+    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    cand = np.flatnonzero(twin > np.arange(3 * m))
+
+    def nxt(h):
+        return h - h % 3 + (h + 1) % 3
+
+    def prv(h):
+        return h - h % 3 + (h + 2) % 3
+
+    for _ in range(rounds):
+        cand = cand[twin[cand] >= 0]
+        h1 = np.unique(np.minimum(cand, twin[cand]))
+        h2 = twin[h1]
+        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(h2)]
+        excess = _corner_angle(P, c, a, b) + _corner_angle(P, d, a, b) - np.pi
+        after = _corner_angle(P, a, c, d) + _corner_angle(P, b, c, d) - np.pi
+        scale = np.sum((U[a] - U[b]) ** 2, axis=1) + np.sum((U[c] - U[d]) ** 2, axis=1)
+        ok = ((excess > 1e-9) & (after < excess - 1e-12) & (_orient(U, a, d, c) > 1e-12 * scale)
+              & (_orient(U, d, b, c) > 1e-12 * scale))
+        if not ok.any():
+            break
+        h1, h2, pr = h1[ok], h2[ok], excess[ok]
+        outer = twin[np.stack([nxt(h1), prv(h1), nxt(h2), prv(h2)], 1)]   # b-c, c-a, a-d, d-b
+        claims = np.concatenate([np.stack([h1 // 3, h2 // 3], 1), np.where(outer >= 0, outer // 3, -1)], 1)
+        valid = claims >= 0
+        fe = claims[valid]
+        ee = np.broadcast_to(np.arange(h1.size)[:, None], claims.shape)[valid]
+        best = np.full(m, -np.inf)
+        np.maximum.at(best, fe, pr[ee])
+        win = np.ones(h1.size, bool)
+        np.logical_and.at(win, ee, pr[ee] == best[fe])
+        # Equal excesses can leave two winners on one face: the lowest candidate keeps it.
+        first = np.full(m, h1.size)
+        np.minimum.at(first, fe[win[ee]], ee[win[ee]])
+        np.logical_and.at(win, ee, first[fe] == ee)
+        lost = h1[~win]
+        h1, h2, outer = h1[win], h2[win], outer[win]
+        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(h2)]
+        g1, g2 = h1 - h1 % 3, h2 - h2 % 3
+        F[g1 // 3] = np.stack([a, d, c], 1)
+        F[g2 // 3] = np.stack([d, b, c], 1)
+        t_bc, t_ca, t_ad, t_db = outer.T
+        twin[g1], twin[g1 + 1], twin[g1 + 2] = t_ad, g2 + 2, t_ca
+        twin[g2], twin[g2 + 1], twin[g2 + 2] = t_db, t_bc, g1 + 1
+        for t, h in ((t_ad, g1), (t_ca, g1 + 2), (t_db, g2), (t_bc, g2 + 1)):
+            twin[t[t >= 0]] = h[t >= 0]
+        cand = np.concatenate([g1, g1 + 1, g1 + 2, g2, g2 + 1, g2 + 2, lost])
+    return F
 
 
 def _outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:

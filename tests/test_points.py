@@ -161,3 +161,42 @@ def test_bump_domain_half_points():
     # Measured: 72 % of the points end up in the disk (the rest are peeled off with bridging
     # triangles); issue 4 keeps this open.
     assert rec.topology.referenced.mean() > 0.7
+
+
+def _non_delaunay_3d(F, P, U):
+    """Interior edges that the 3D flip pass would still flip (excess angle, UVs kept valid)."""
+    again = PT._flip_towards_3d_delaunay(F, P, U, 1)
+    return int(np.any(again != F, axis=1).sum())
+
+
+def test_3d_flips_keep_a_one_to_one_triangulation_and_bring_faces_to_the_surface():
+    # Random points on a strongly curved patch (a half cylinder of radius 1): the Delaunay
+    # triangulation of the parameter points has many edges that are not Delaunay in 3D.
+    rng = np.random.default_rng(4)
+    t, h = rng.uniform(0, np.pi, 900), rng.uniform(0, 2.0, 900)
+    P = np.column_stack([np.cos(t), h, np.sin(t)])
+    rec0 = jp.reconstruct_surface(P, flip_rounds=0)
+    rec = jp.reconstruct_surface(P)
+    U = np.asarray(rec.uv)
+    assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
+    F0 = PT._delaunay(U)
+    F1 = PT._flip_towards_3d_delaunay(F0, P, U, 100)
+    assert len(F1) == len(F0) and PT._orient(U, *F1.T).min() > 0
+    assert jp.TriMesh(P, F1).topology.is_disk
+    assert _non_delaunay_3d(F0, P, U) > 0 and _non_delaunay_3d(F1, P, U) == 0
+    # Distance of face points to the cylinder, before and after.
+    def worst(m):
+        X = np.asarray(m.vertices)[m.faces]
+        S = np.concatenate([X.mean(1), (X[:, 0] + X[:, 1]) / 2, (X[:, 1] + X[:, 2]) / 2, (X[:, 2] + X[:, 0]) / 2])
+        return np.abs(1 - np.hypot(S[:, 0], S[:, 2])).max()
+    assert worst(rec) < worst(rec0)
+
+
+def test_delaunay_fallback_without_triangle_matches(monkeypatch):
+    import sys
+    U = np.random.default_rng(5).random((400, 2))
+    F = PT._delaunay(U)
+    monkeypatch.setitem(sys.modules, "triangle", None)          # import triangle -> ImportError
+    G = PT._delaunay(U)
+    key = lambda T: {tuple(sorted(f)) for f in T.tolist()}
+    assert key(F) == key(G) and PT._orient(U, *G.T).min() > 0
