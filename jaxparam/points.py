@@ -579,16 +579,18 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
     for _ in range(rounds):
         cand = cand[twin[cand] >= 0]
         h1 = np.unique(np.minimum(cand, twin[cand]))
-        h2 = twin[h1]
-        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(h2)]
+        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(twin[h1])]
         excess = _corner_angle(P, c, a, b) + _corner_angle(P, d, a, b) - np.pi
+        over = np.flatnonzero(excess > 1e-9)
+        h1, excess, a, b, c, d = h1[over], excess[over], a[over], b[over], c[over], d[over]
         after = _corner_angle(P, a, c, d) + _corner_angle(P, b, c, d) - np.pi
         scale = np.sum((U[a] - U[b]) ** 2, axis=1) + np.sum((U[c] - U[d]) ** 2, axis=1)
-        ok = ((excess > 1e-9) & (after < excess - 1e-12) & (_orient(U, a, d, c) > 1e-12 * scale)
+        ok = ((after < excess - 1e-12) & (_orient(U, a, d, c) > 1e-12 * scale)
               & (_orient(U, d, b, c) > 1e-12 * scale))
         if not ok.any():
             break
-        h1, h2, pr = h1[ok], h2[ok], excess[ok]
+        h1, pr = h1[ok], excess[ok]
+        h2 = twin[h1]
         outer = twin[np.stack([nxt(h1), prv(h1), nxt(h2), prv(h2)], 1)]   # b-c, c-a, a-d, d-b
         claims = np.concatenate([np.stack([h1 // 3, h2 // 3], 1), np.where(outer >= 0, outer // 3, -1)], 1)
         valid = claims >= 0
