@@ -242,7 +242,7 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     gap = np.maximum.reduceat(gaps, indptr[:-1])
     spacing = np.bincount(rows, weights=np.linalg.norm(D[order], axis=1), minlength=N) / deg
     if k_detect:
-        det_gap, det_spacing = _gaps_of(P, dist[:, :k_detect], near[:, :k_detect])
+        det_gap, det_spacing = _gaps_of(P, dist[:, :k_detect], near[:, :k_detect], frame=(e1, e2))
         return PointGraph(indptr, indices, gap, normal, spacing, k_detect, det_gap, det_spacing)
     return PointGraph(indptr, indices, gap, normal, spacing)
 
@@ -253,13 +253,15 @@ def _knn_gaps(P: np.ndarray, k: int):
     return _gaps_of(P, *_nearest(P, k))
 
 
-def _gaps_of(P: np.ndarray, dist: np.ndarray, idx: np.ndarray):
-    """:func:`_knn_gaps` from the neighbours ``idx (N, k)`` at distances ``dist (N, k)``; dense
-    arrays: every point has exactly ``k`` neighbours, so no CSR bookkeeping."""
+def _gaps_of(P: np.ndarray, dist: np.ndarray, idx: np.ndarray, frame=None):
+    """:func:`_knn_gaps` from the neighbours ``idx (N, k)`` at distances ``dist (N, k)``, in
+    the tangent frames ``frame = (e1, e2)`` (each ``(N, 3)``; default: PCA of these
+    neighbours).  Dense arrays: every point has exactly ``k`` neighbours."""
     D = P[idx] - P[:, None, :]                              # (N, k, 3)
-    _, vecs = np.linalg.eigh(np.matmul(D.transpose(0, 2, 1), D))
-    e1 = vecs[:, :, 2]
-    e2 = np.cross(vecs[:, :, 0], e1)
+    if frame is None:
+        _, vecs = np.linalg.eigh(np.matmul(D.transpose(0, 2, 1), D))
+        frame = vecs[:, :, 2], np.cross(vecs[:, :, 0], vecs[:, :, 2])
+    e1, e2 = frame
     ang = np.arctan2(np.matmul(D, e2[:, :, None])[..., 0], np.matmul(D, e1[:, :, None])[..., 0])
     ang.sort(axis=1)
     gaps = np.diff(ang, axis=1, append=ang[:, :1] + 2 * np.pi)
