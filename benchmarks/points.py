@@ -23,34 +23,24 @@ import numpy as np
 
 
 def run(n: int) -> dict:
-    import jax.numpy as jnp
-    from scipy.spatial import Delaunay
-
     import jaxparam as jp
-    from jaxparam import points as PT
 
     rng = np.random.default_rng(0)
     xy = rng.random((n, 2))
     P = np.column_stack([xy, 0.2 * np.sin(3 * xy[:, 0]) * np.cos(3 * xy[:, 1])])
     out = {"points": n}
-    t = time.perf_counter()
-    g = PT.point_graph(P, 10)
-    out["neighbours"] = time.perf_counter() - t
-    t = time.perf_counter()
-    bnd = PT.detect_boundary(P, g)
-    out["boundary"] = time.perf_counter() - t
-    t = time.perf_counter()
-    uv, _ = jp.meshless_map(P, graph=g, boundary_indices=bnd)
-    uv.block_until_ready()
-    out["weights_and_solve"] = time.perf_counter() - t
-    t = time.perf_counter()
-    Delaunay(np.asarray(uv))
-    out["delaunay"] = time.perf_counter() - t
+    # First call in a fresh process: what a user waits for, JIT compilation included.
     t = time.perf_counter()
     rec = jp.reconstruct_surface(P)
-    out["reconstruct_end_to_end"] = time.perf_counter() - t
+    out["first_call"] = time.perf_counter() - t
+    # Second call on a new copy of the points: compiled code reused, nothing else cached.
+    t = time.perf_counter()
+    rec = jp.reconstruct_surface(P.copy())
+    out["end_to_end"] = time.perf_counter() - t
+    out.update(rec.stage_seconds)           # "flips": seconds of the 3D edge-flip pass
     out["used"] = float(rec.topology.referenced.mean())
-    out["flips"] = jp.metrics.flips(rec, rec.uv)
+    out["inverted"] = jp.metrics.flips(rec, rec.uv)
+    out["disk"] = bool(rec.topology.is_disk)
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return out
 
@@ -64,16 +54,16 @@ def main() -> int:
         print(json.dumps(run(args.one)))
         return 0
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
-    cols = ["points", "neighbours", "boundary", "weights_and_solve", "delaunay",
-            "reconstruct_end_to_end", "used", "flips", "peak_rss_mb"]
-    print(" ".join(f"{c:>14s}" for c in cols))
+    cols = ["points", "neighbours", "boundary", "weights_and_solve", "delaunay", "flips",
+            "peel_and_topology", "end_to_end", "first_call", "used", "inverted", "disk", "peak_rss_mb"]
+    print(" ".join(f"{c[:14]:>14s}" for c in cols))
     for n in args.sizes:
         p = subprocess.run([sys.executable, __file__, "--one", str(n)], capture_output=True, text=True)
         if p.returncode:
             print(f"{n:>14d} failed: {p.stderr.strip().splitlines()[-1:]}")
             continue
         r = json.loads(p.stdout.strip().splitlines()[-1])
-        print(" ".join(f"{r[c]:14.3f}" if isinstance(r[c], float) else f"{r[c]:>14d}" for c in cols), flush=True)
+        print(" ".join(f"{r[c]:14.3f}" if isinstance(r[c], float) else f"{r[c]:>14}" for c in cols), flush=True)
     return 0
 
 
