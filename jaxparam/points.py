@@ -207,45 +207,84 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     """Neighbours, tangent planes and angularly sorted fans of every point; with ``k`` nearest
     neighbours, also the angular gaps of the ``k_detect`` nearest (for
     :func:`detect_boundary`) from the same tree query (0 skips them)."""
-    P = np.asarray(points, np.float64)
-    N = P.shape[0]
+    P0 = np.asarray(points, np.float64)
+    N = P0.shape[0]
+    # Work in a space-filling-curve order, so that neighbours sit close in memory (the tree
+    # query and the gathers below run 1.3-2x faster on a large shuffled cloud); every result
+    # is mapped back to the input's order at the end.
+    perm = _spatial_order(P0)
+    P = P0[perm]
     k_detect = min(k_detect, N - 1) if radius is None else 0
     dist, near = _nearest(P, max(k, k_detect)) if radius is None else (None, None)
     indptr, indices = knn_graph(P, k, radius=radius, symmetric=symmetric, nearest=near)
-    rows = np.repeat(np.arange(N), np.diff(indptr))
     deg = np.diff(indptr)
     if np.any(deg < 2):
-        lonely = np.flatnonzero(deg < 2)
+        lonely = np.sort(perm[deg < 2])
         raise PointCloudError(f"meshless_map: points {first_few(lonely)} have fewer than 2 neighbours; "
                               "increase k or radius.")
-    # PCA normal of each neighbourhood (the point and its neighbours).
-    D = P[indices] - P[rows]
-    # Rows are contiguous in CSR order and every point has >= 2 neighbours: reduceat sums them.
-    C = np.add.reduceat(D[:, :, None] * D[:, None, :], indptr[:-1], axis=0)
+    starts = indptr[:-1]
+    D = P[indices] - np.repeat(P, deg, axis=0)
+    # PCA normal of each neighbourhood (the point and its neighbours).  Rows are contiguous
+    # in CSR order and every point has >= 2 neighbours: reduceat sums them.
+    C = np.empty((N, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            C[:, a, b] = C[:, b, a] = np.add.reduceat(D[:, a] * D[:, b], starts)
     _, vecs = np.linalg.eigh(C)
     normal = vecs[:, :, 0]
     # Orient normals consistently with the global best-fit plane's normal.
-    g = np.linalg.svd(P - P.mean(0), full_matrices=False)[2][2]
+    g = _global_frame(P)[2]
     normal *= np.where(normal @ g < 0, -1.0, 1.0)[:, None]
     e1 = vecs[:, :, 2]
     e2 = np.cross(normal, e1)
-    ang = np.arctan2(np.einsum("ij,ij->i", D, e2[rows]), np.einsum("ij,ij->i", D, e1[rows]))
+    ang = np.arctan2(np.einsum("ij,ij->i", D, np.repeat(e2, deg, axis=0)),
+                     np.einsum("ij,ij->i", D, np.repeat(e1, deg, axis=0)))
+    spacing = np.add.reduceat(np.sqrt(np.einsum("ij,ij->i", D, D)), starts) / deg
     # One sort on a combined key (row, then angle): ang + pi lies in [0, 2 pi] < 8, and the key
     # stays exact to ~2e-9 rad up to 10^8 points; np.lexsort on two keys is 4x slower.
+    rows = np.repeat(np.arange(N), deg)
     order = np.argsort(rows * 8.0 + (ang + np.pi))
     indices, ang = indices[order], ang[order]
     # Largest angular gap per point (including the wrap-around one).
     nxt = np.arange(indices.size) + 1
-    end = indptr[rows + 1]
-    nxt = np.where(nxt >= end, indptr[rows], nxt)
-    gaps = np.mod(ang[nxt] - ang, 2 * np.pi)
-    gaps = np.where(deg[rows] == 1, 2 * np.pi, gaps)
-    gap = np.maximum.reduceat(gaps, indptr[:-1])
-    spacing = np.bincount(rows, weights=np.linalg.norm(D[order], axis=1), minlength=N) / deg
-    if k_detect:
-        det_gap, det_spacing = _gaps_of(P, dist[:, :k_detect], near[:, :k_detect], frame=(e1, e2))
-        return PointGraph(indptr, indices, gap, normal, spacing, k_detect, det_gap, det_spacing)
-    return PointGraph(indptr, indices, gap, normal, spacing)
+    nxt = np.where(nxt >= indptr[rows + 1], indptr[rows], nxt)
+    gap = np.maximum.reduceat(np.mod(ang[nxt] - ang, 2 * np.pi), starts)
+    extra = ((k_detect,) + _gaps_of(P, dist[:, :k_detect], near[:, :k_detect], frame=(e1, e2))
+             if k_detect else (0, None, None))
+    # Back to the input's order: row v of the result is row inv[v] here, neighbours renamed.
+    inv = np.empty(N, np.int64)
+    inv[perm] = np.arange(N)
+    deg_out = deg[inv]
+    ptr_out = np.zeros(N + 1, np.int64)
+    np.cumsum(deg_out, out=ptr_out[1:])
+    src = np.repeat(starts[inv] - ptr_out[:-1], deg_out) + np.arange(ptr_out[-1])
+    extra = extra[:1] + tuple(x if x is None else x[inv] for x in extra[1:])
+    return PointGraph(ptr_out, perm[indices[src]], gap[inv], normal[inv], spacing[inv], *extra)
+
+
+def _global_frame(P: np.ndarray) -> np.ndarray:
+    """``(3, 3)`` rows: the best-fit plane's axes and its normal, a right-handed frame whose
+    normal's largest component is positive (so it does not depend on the points' order)."""
+    V = np.linalg.svd(P - P.mean(0), full_matrices=False)[2]
+    if V[2][np.argmax(np.abs(V[2]))] < 0:
+        V[2] = -V[2]
+    V[1] = np.cross(V[2], V[0])
+    return V
+
+
+def _spatial_order(P: np.ndarray) -> np.ndarray:
+    """A permutation putting points ``(N, 3)`` in Morton (Z-curve) order of a 2^21 grid."""
+    def spread(x):                      # the 21 low bits of x moved to every third bit
+        x = x.astype(np.uint64)
+        for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                            (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
+            x = (x | (x << np.uint64(shift))) & np.uint64(mask)
+        return x
+
+    lo, span = P.min(0), float(np.ptp(P, axis=0).max())
+    q = ((P - lo) * ((2**21 - 1) / (span if span > 0 else 1.0))).astype(np.int64)
+    key = spread(q[:, 0]) | (spread(q[:, 1]) << np.uint64(1)) | (spread(q[:, 2]) << np.uint64(2))
+    return np.argsort(key, kind="stable")
 
 
 def _knn_gaps(P: np.ndarray, k: int):
@@ -329,7 +368,7 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = 0.7
         raise PointCloudError("meshless_map: could not order the boundary points into a polygon; "
                               "pass boundary=indices.")
     # Anticlockwise about the global normal.
-    g = np.linalg.svd(P - P.mean(0), full_matrices=False)[2]
+    g = _global_frame(P)
     uv = (P[loop] - P[loop].mean(0)) @ g[:2].T
     area = 0.5 * np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1])
     return loop if area > 0 else loop[::-1]

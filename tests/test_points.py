@@ -200,3 +200,18 @@ def test_delaunay_fallback_without_triangle_matches(monkeypatch):
     G = PT._delaunay(U)
     key = lambda T: {tuple(sorted(f)) for f in T.tolist()}
     assert key(F) == key(G) and PT._orient(U, *G.T).min() > 0
+
+
+def test_point_graph_does_not_depend_on_the_input_order(surface_points):
+    P, _, _ = surface_points
+    perm = np.random.default_rng(7).permutation(len(P))
+    inv = np.argsort(perm)
+    a, b = PT.point_graph(P, 10), PT.point_graph(P[perm], 10)
+    np.testing.assert_allclose(a.normal, b.normal[inv], atol=1e-12)
+    np.testing.assert_allclose(a.gap, b.gap[inv], atol=1e-12)
+    np.testing.assert_allclose(a.detect_gap, b.detect_gap[inv], atol=1e-12)
+    for v in range(0, len(P), 17):
+        fan_a = a.indices[a.indptr[v]:a.indptr[v + 1]]
+        fan_b = perm[b.indices[b.indptr[inv[v]]:b.indptr[inv[v] + 1]]]
+        # The same cyclic order (anticlockwise about the same normal), maybe from another start.
+        assert fan_b.tolist() in [np.roll(fan_a, s).tolist() for s in range(fan_a.size)]
