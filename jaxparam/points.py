@@ -661,6 +661,13 @@ def _corner_angle(P, at, u, v):
     return np.arctan2(np.linalg.norm(np.cross(x, y), axis=1), np.einsum("ij,ij->i", x, y))
 
 
+def _face_angles(P, F):
+    """``(m, 3)`` 3D angles (radians) at the corners of the faces ``F (m, 3)``."""
+    X = P[F]
+    e, f = X[:, [1, 2, 0]] - X, X[:, [2, 0, 1]] - X
+    return np.arctan2(np.linalg.norm(np.cross(e, f), axis=2), np.einsum("mcd,mcd->mc", e, f))
+
+
 def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int) -> np.ndarray:
     """Flip interior edges ``a-b`` (faces ``(a, b, c)``, ``(b, a, d)``) whose opposite 3D angles
     at ``c`` and ``d`` sum to more than pi, and to more than the new diagonal's, into
@@ -683,6 +690,7 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
     twin = np.full(3 * m, -1, np.int64)
     twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
     cand = np.flatnonzero(twin > np.arange(3 * m))
+    angles = _face_angles(P, F).reshape(-1)             # angles[h]: at corner h % 3 of face h // 3
 
     def nxt(h):
         return h - h % 3 + (h + 1) % 3
@@ -694,10 +702,10 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
         cand = cand[twin[cand] >= 0]
         h1 = np.sort(np.minimum(cand, twin[cand]))
         h1 = h1[np.concatenate([[True], h1[1:] != h1[:-1]])]
-        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(twin[h1])]
-        excess = _corner_angle(P, c, a, b) + _corner_angle(P, d, a, b) - np.pi
+        excess = angles[prv(h1)] + angles[prv(twin[h1])] - np.pi
         over = np.flatnonzero(excess > 1e-9)
-        h1, excess, a, b, c, d = h1[over], excess[over], a[over], b[over], c[over], d[over]
+        h1, excess = h1[over], excess[over]
+        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(twin[h1])]
         after = _corner_angle(P, a, c, d) + _corner_angle(P, b, c, d) - np.pi
         scale = np.sum((U[a] - U[b]) ** 2, axis=1) + np.sum((U[c] - U[d]) ** 2, axis=1)
         ok = ((after < excess - 1e-12) & (_orient(U, a, d, c) > 1e-12 * scale)
@@ -730,6 +738,8 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
         twin[g2], twin[g2 + 1], twin[g2 + 2] = t_db, t_bc, g1 + 1
         for t, h in ((t_ad, g1), (t_ca, g1 + 2), (t_db, g2), (t_bc, g2 + 1)):
             twin[t[t >= 0]] = h[t >= 0]
+        changed = np.concatenate([g1, g2]) // 3
+        angles.reshape(m, 3)[changed] = _face_angles(P, F[changed])
         cand = np.concatenate([g1, g1 + 1, g1 + 2, g2, g2 + 1, g2 + 2, lost])
     return F
 
