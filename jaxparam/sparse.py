@@ -268,7 +268,7 @@ class _PardisoHandle:
     redoes the analysis, which for ``mtype 11`` depends on the values.
     """
 
-    def __init__(self, pattern: Pattern, symmetric: bool):
+    def __init__(self, pattern: Pattern, symmetric: bool, pivoting: bool = True):
         self.fn, (_, pt_dtype) = _mkl()
         self.n, self.symmetric = pattern.n, symmetric
         self.mtype = 2 if symmetric else 11
@@ -283,7 +283,11 @@ class _PardisoHandle:
         ip[1] = 3                          # METIS nested dissection, OpenMP-parallel (serial: 1.5x slower)
         ip[7] = 0                          # refinement only after perturbed pivots; residuals are checked
         ip[9] = 8 if symmetric else 13     # pivot perturbation 1e-8 / 1e-13
-        ip[10] = ip[12] = 0 if symmetric else 1   # LU: scaling and weighted matching
+        # LU: scaling and weighted matching only where pivoting may be needed; a diagonally
+        # dominant matrix with a positive diagonal (I - Lambda of the convex-combination maps)
+        # needs none, and matching cost 0.2 s at 726k unknowns.
+        ip[10] = ip[12] = 1 if pivoting else 0
+        ip[23] = 0 if symmetric else 10    # LU: the improved two-level factorization (0.99 s vs 1.34 s)
         ip[17] = -1                        # report the factor's nonzeros
         ip[24] = 1                         # sequential forward/backward solve: bitwise reproducible
         ip[34] = 1                         # zero-based indices
@@ -359,6 +363,14 @@ _handles_lock = threading.Lock()
 _tokens = itertools.count(1)
 
 
+def _diagonally_dominant(pattern: Pattern, values: np.ndarray) -> bool:
+    """Whether every row has a positive diagonal at least the sum of its off-diagonal sizes."""
+    diag = pattern.indices == pattern.rows
+    d = np.bincount(pattern.rows[diag], weights=values[diag], minlength=pattern.n)
+    off = np.bincount(pattern.rows[~diag], weights=np.abs(values[~diag]), minlength=pattern.n)
+    return bool(np.all(d > 0) and np.all(d >= off * (1 - 1e-12)))
+
+
 class _Pardiso:
     def __init__(self, pattern: Pattern, values: np.ndarray, symmetric: bool):
         if symmetric:
@@ -367,7 +379,7 @@ class _Pardiso:
                 if h is None:
                     h = _handles[pattern] = _PardisoHandle(pattern, True)
         else:
-            h = _PardisoHandle(pattern, False)
+            h = _PardisoHandle(pattern, False, pivoting=not _diagonally_dominant(pattern, values))
         self.handle = h
         self.a = np.ascontiguousarray(values if h.take is None else values[h.take])
         self.token = next(_tokens)
