@@ -304,7 +304,7 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     H = a.size
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     ukey = lo * np.int64(n) + hi
-    order = np.argsort(ukey, kind="stable")
+    order = np.argsort(ukey, kind="stable")   # faster than the default here (runs of sorted keys)
     us = ukey[order]
     same_next = us[1:] == us[:-1]
     pair = np.flatnonzero(same_next)
@@ -356,17 +356,16 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     # The wedge (half-edge index 3 f + corner) that starts at each ring entry; -1 after the last.
     ring_wedge = np.full(ring_idx.size, -1, np.int64)
     ring_wedge[slot_w] = np.arange(H)
-    # prev/next within each ring (cyclic for interior vertices).
-    k = np.arange(ring_idx.size)
-    start = ring_ptr[ring_row]
-    end = ring_ptr[ring_row + 1]
-    nxt = k + 1
-    prv = k - 1
-    bd_row = is_boundary[ring_row]
-    nxt = np.where(nxt >= end, np.where(bd_row, -1, start), nxt)
-    prv = np.where(prv < start, np.where(bd_row, -1, end - 1), prv)
-    ring_next = np.where(nxt >= 0, ring_idx[np.maximum(nxt, 0)], -1)
-    ring_prev = np.where(prv >= 0, ring_idx[np.maximum(prv, 0)], -1)
+    # prev/next within each ring (cyclic for interior vertices): the ring shifted by one entry,
+    # with each row's ends fixed up (plain copies; no per-entry lookup of the row bounds).
+    ring_next = np.empty_like(ring_idx)
+    ring_prev = np.empty_like(ring_idx)
+    ring_next[:-1], ring_prev[1:] = ring_idx[1:], ring_idx[:-1]
+    has = np.flatnonzero(deg > 0)
+    first, last = ring_ptr[has], ring_ptr[has + 1] - 1
+    bd_has = is_boundary[has]
+    ring_next[last] = np.where(bd_has, -1, ring_idx[first])
+    ring_prev[first] = np.where(bd_has, -1, ring_idx[last])
 
     loops = _boundary_loops_from(a[is_bd_he], b[is_bd_he], n)
 
