@@ -46,6 +46,7 @@ from . import sparse
 from .errors import MeshFileError, PointCloudError, first_few
 from .geometry import safe_norm
 from .mesh import TriMesh
+from .topology import renumber
 
 __all__ = ["load_points", "check_points", "knn_graph", "PointGraph", "point_graph",
            "detect_boundary", "meshless_map", "reconstruct_surface", "WEIGHTS"]
@@ -115,15 +116,24 @@ def check_points(points, *, k: int = 10, merge_duplicates: bool = False):
         raise PointCloudError(f"meshless_map: points {first_few(bad)} have non-finite coordinates; "
                               "remove them.")
     kept = np.arange(P.shape[0])
-    _, first, inv = np.unique(P, axis=0, return_index=True, return_inverse=True)
-    inv = inv.reshape(-1)
-    dup = np.flatnonzero(first[inv] != np.arange(P.shape[0]))
+    # Equal points share a Morton key: only points whose key repeats need the exact (and, over
+    # all points, 3x slower) row-wise np.unique.
+    codes = _morton_keys(P)
+    key = np.sort(codes)
+    rep = key[1:][key[1:] == key[:-1]]
+    maybe = np.flatnonzero(np.isin(codes, rep)) if rep.size else np.zeros(0, np.int64)
+    dup = np.zeros(0, np.int64)
+    if maybe.size:
+        _, first, inv = np.unique(P[maybe], axis=0, return_index=True, return_inverse=True)
+        first = maybe[first][inv.reshape(-1)]             # each point's first equal point
+        dup = maybe[first != maybe]
     if dup.size:
         if not merge_duplicates:
             raise PointCloudError(
                 f"meshless_map: points {first_few(dup)} duplicate earlier points (point {int(dup[0])} "
-                f"equals point {int(first[inv[dup[0]]])}); remove them or pass merge_duplicates=True.")
-        kept = np.sort(first)
+                f"equals point {int(first[maybe == dup[0]][0])}); remove them or pass "
+                "merge_duplicates=True.")
+        kept = np.setdiff1d(kept, dup)
         P = P[kept]
     if P.shape[0] < 4:
         raise PointCloudError(f"meshless_map: {P.shape[0]} points are too few; at least 4 are needed.")
@@ -274,6 +284,11 @@ def _global_frame(P: np.ndarray) -> np.ndarray:
 
 def _spatial_order(P: np.ndarray) -> np.ndarray:
     """A permutation putting points ``(N, 3)`` in Morton (Z-curve) order of a 2^21 grid."""
+    return np.argsort(_morton_keys(P), kind="stable")
+
+
+def _morton_keys(P: np.ndarray) -> np.ndarray:
+    """``(N,) uint64`` Morton (Z-curve) codes of points ``(N, 3)`` on a 2^21 grid over their box."""
     def spread(x):                      # the 21 low bits of x moved to every third bit
         x = x.astype(np.uint64)
         for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
@@ -283,8 +298,7 @@ def _spatial_order(P: np.ndarray) -> np.ndarray:
 
     lo, span = P.min(0), float(np.ptp(P, axis=0).max())
     q = ((P - lo) * ((2**21 - 1) / (span if span > 0 else 1.0))).astype(np.int64)
-    key = spread(q[:, 0]) | (spread(q[:, 1]) << np.uint64(1)) | (spread(q[:, 2]) << np.uint64(2))
-    return np.argsort(key, kind="stable")
+    return spread(q[:, 0]) | (spread(q[:, 1]) << np.uint64(1)) | (spread(q[:, 2]) << np.uint64(2))
 
 
 def _knn_gaps(P: np.ndarray, k: int):
@@ -529,6 +543,16 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
         if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= N or np.unique(bnd).size != bnd.size:
             raise PointCloudError(f"meshless_map: boundary_indices must be >= 3 distinct point indices "
                                   f"in [0, {N}), in order; got {bnd.size} values.")
+    sym = weights in ("uniform", "inverse_distance") and symmetric and radius is None
+    return _map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
+                       symmetric=sym), bnd
+
+
+def _map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary: str, spacing: str,
+                symmetric: bool):
+    """The meshless map of checked points ``P (N, 3)`` (array or tracer) with their graph and
+    boundary polygon: weights, boundary map, the sparse solve; ``(N, 2)`` UVs."""
+    N = P.shape[0]
     S = _system(graph, bnd, N)
     _check_solvable(S, N, bnd)
     Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
@@ -540,9 +564,8 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
 
     vals, rhs = _assemble_jit(w, uv_b, S.rows_e, S.ii, S.ib, S.ib_slot, S.rows_e[S.ib], S.diag_pos,
                               S.off_pos, ni=S.n_rows, nnz=S.pattern.nnz)
-    sym = weights in ("uniform", "inverse_distance") and symmetric and radius is None
-    x = sparse.solve(S.pattern, vals, rhs, symmetric=sym)
-    return _scatter(x, uv_b, jnp.asarray(S.interior), jnp.asarray(bnd), n=N), bnd
+    x = sparse.solve(S.pattern, vals, rhs, symmetric=symmetric)
+    return _scatter(x, uv_b, jnp.asarray(S.interior), jnp.asarray(bnd), n=N)
 
 
 # One compiled kernel each instead of a dozen eager operations (each compiled on its own
@@ -586,17 +609,43 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
         rec = jp.reconstruct_surface(points)
         rec.uv, rec.faces
     """
-    options.setdefault("weights", "shape_preserving")
+    weights = options.pop("weights", "shape_preserving")
+    k, radius = options.pop("k", 10), options.pop("radius", None)
+    symmetric = options.pop("symmetric", True)
+    boundary, spacing = options.pop("boundary", "circle"), options.pop("spacing", "chord")
+    gap, user_bnd = options.pop("gap", 0.7 * np.pi), options.pop("boundary_indices", None)
+    merge = options.pop("merge_duplicates", False)
+    if options:
+        raise PointCloudError(f"reconstruct_surface: unknown options {sorted(options)}.")
+    if weights not in WEIGHTS:
+        raise PointCloudError(f"reconstruct_surface: unknown weights {weights!r}; use one of {WEIGHTS}.")
+    if boundary not in ("circle", "square") or spacing not in bmap.SPACINGS:
+        raise PointCloudError(f"reconstruct_surface: boundary must be 'circle' or 'square' and spacing "
+                              f"one of {bmap.SPACINGS}; got {boundary!r}, {spacing!r}.")
     clock = _StageClock()
-    P, kept = check_points(points, k=options.get("k", 10), merge_duplicates=options.pop("merge_duplicates", False))
-    graph = point_graph(P, options.get("k", 10), radius=options.get("radius"),
-                        symmetric=options.get("symmetric", True))
+    P0, kept = check_points(points, k=k, merge_duplicates=merge)
+    # Everything below runs on the points in Morton order (neighbours close in memory: the
+    # weights, the triangulation and the flips run 1.3-2x faster on a large shuffled cloud);
+    # the result is renumbered to the input's order at the end.
+    perm = _spatial_order(P0)
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(perm.size)
+    P = P0[perm]
+    graph = point_graph(P, k, radius=radius, symmetric=symmetric)
     clock("neighbours")
-    if options.get("boundary_indices") is None:
-        options["boundary_indices"] = detect_boundary(P, graph, gap=options.pop("gap", 0.7 * np.pi))
+    if user_bnd is None:
+        bnd = detect_boundary(P, graph, gap=gap)
         clock("boundary")
-    uv, bnd = meshless_map(P, graph=graph, **options)
-    U = np.asarray(uv)
+    else:
+        bnd = np.asarray(user_bnd, np.int64)
+        if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= P.shape[0] \
+                or np.unique(bnd).size != bnd.size:
+            raise PointCloudError(f"reconstruct_surface: boundary_indices must be >= 3 distinct point "
+                                  f"indices in [0, {P.shape[0]}), in order; got {bnd.size} values.")
+        bnd = inv[bnd]
+    U = np.asarray(_map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
+                               symmetric=weights in ("uniform", "inverse_distance") and symmetric
+                               and radius is None))
     clock("weights_and_solve")
     F = _delaunay(U)
     clock("delaunay")
@@ -610,10 +659,11 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     keep = ~_outside_bridges(F, too_long, len(P))
     F, topology = _largest_manifold_disk(F[keep], len(P))
     n_in = np.asarray(points).shape[0]
-    V = np.asarray(points, np.float64) if kept.size == n_in else P
-    mesh = TriMesh(V, F, topology, uv=U, validate=False, name="reconstruction")
+    V = np.asarray(points, np.float64) if kept.size == n_in else P0
+    mesh = TriMesh(V, None, renumber(topology, perm), uv=U[inv], validate=False,
+                   name="reconstruction")
     clock("peel_and_topology")
-    mesh.boundary_points = bnd
+    mesh.boundary_points = perm[bnd]
     mesh.stage_seconds = clock.seconds
     return mesh
 

@@ -399,6 +399,53 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
         genus=int(genus), dividing_edges=dividing)
 
 
+def renumber(t: Topology, new_id: np.ndarray) -> Topology:
+    """The same topology with vertex ``v`` renamed ``new_id[v]`` (a permutation of
+    ``range(n)``); equal, field by field, to :func:`build` of the renamed faces, at a third
+    of its cost (no sorting of half-edges, no fan walks)."""
+    new_id = np.asarray(new_id, np.int64)
+    n = t.n_vertices
+    old_of = np.empty(n, np.int64)
+    old_of[new_id] = np.arange(n)
+    # Edges: renamed, re-sorted; the face on the lo -> hi side stays in column 0.
+    e = new_id[t.edges]
+    swap = e[:, 0] > e[:, 1]
+    e = np.sort(e, axis=1)
+    order = np.argsort(e[:, 0] * np.int64(n) + e[:, 1], kind="stable")
+    edges = e[order]
+    ef = np.where(swap[:, None], t.edge_faces[:, ::-1], t.edge_faces)[order]
+    # One-rings: row r is the old row old_of[r], its entries renamed.
+    deg = np.diff(t.ring_ptr)[old_of]
+    ring_ptr = np.zeros(n + 1, np.int64)
+    np.cumsum(deg, out=ring_ptr[1:])
+    src = np.repeat(t.ring_ptr[:-1][old_of] - ring_ptr[:-1], deg) + np.arange(ring_ptr[-1])
+    ren = lambda a: np.where(a >= 0, new_id[np.maximum(a, 0)], -1)   # noqa: E731
+    is_boundary, referenced = t.is_boundary[old_of], t.referenced[old_of]
+    interior = np.flatnonzero(referenced & ~is_boundary)
+    boundary = np.flatnonzero(is_boundary)
+    slot = np.full(n, -1, np.int64)
+    slot[interior] = np.arange(interior.size)
+    slot[boundary] = np.arange(boundary.size)
+    # Components numbered by their smallest vertex, as build() numbers them.
+    comp = t.components[old_of]
+    ref = comp >= 0
+    first = np.full(t.n_components, n, np.int64)
+    np.minimum.at(first, comp[ref], np.flatnonzero(ref))
+    rank = np.empty(t.n_components, np.int64)
+    rank[np.argsort(first)] = np.arange(t.n_components)
+    comp = np.where(ref, rank[np.maximum(comp, 0)], -1)
+    loops = [new_id[l] for l in t.boundary_loops]
+    loops.sort(key=lambda l: (-len(l), int(l.min())))
+    both = is_boundary[edges[:, 0]] & is_boundary[edges[:, 1]] & (ef.min(axis=1) >= 0)
+    return Topology(
+        n_vertices=n, faces=new_id[t.faces], edges=edges, edge_faces=ef, boundary_loops=tuple(loops),
+        ring_ptr=ring_ptr, ring_idx=new_id[t.ring_idx[src]], ring_prev=ren(t.ring_prev[src]),
+        ring_next=ren(t.ring_next[src]), ring_row=np.repeat(np.arange(n), deg),
+        ring_wedge=t.ring_wedge[src], is_boundary=is_boundary, referenced=referenced,
+        interior=interior, boundary=boundary, slot=slot, components=comp,
+        n_components=t.n_components, euler=t.euler, genus=t.genus, dividing_edges=edges[both])
+
+
 def _boundary_loops_from(ba: np.ndarray, bb: np.ndarray, n: int) -> tuple:
     """Order boundary half-edges ``ba -> bb`` into loops, longest first."""
     if ba.size == 0:

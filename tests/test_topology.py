@@ -112,3 +112,21 @@ def test_hole_loops_longest_first():
     assert len(t.boundary_loops) == 2
     assert len(t.boundary_loops[0]) == 24 and len(t.boundary_loops[1]) in (6, 8)
     assert t.genus == 0
+
+
+@pytest.mark.parametrize("make", [lambda: jp.shapes.disk(6, seed=2), lambda: jp.shapes.torus(10, 6),
+                                  lambda: jp.shapes.cylinder_patch(8, 5)])
+def test_renumber_equals_a_fresh_build(make):
+    mesh = make()
+    n = mesh.n_vertices + 3                      # three unreferenced vertices too
+    t = T.build(mesh.faces, n)
+    new_id = np.random.default_rng(1).permutation(n)
+    a, b = T.renumber(t, new_id), T.build(new_id[mesh.faces], n)
+    for f in ("faces", "edges", "edge_faces", "ring_ptr", "ring_idx", "ring_prev", "ring_next",
+              "ring_row", "ring_wedge", "is_boundary", "referenced", "interior", "boundary", "slot",
+              "components", "dividing_edges"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert len(a.boundary_loops) == len(b.boundary_loops)
+    for la, lb in zip(a.boundary_loops, b.boundary_loops):
+        np.testing.assert_array_equal(la, lb)
+    assert (a.n_components, a.euler, a.genus) == (b.n_components, b.euler, b.genus)
