@@ -220,16 +220,33 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     P0 = np.asarray(points, np.float64)
     N = P0.shape[0]
     # Work in a space-filling-curve order, so that neighbours sit close in memory (the tree
-    # query and the gathers below run 1.3-2x faster on a large shuffled cloud); every result
-    # is mapped back to the input's order at the end.
+    # query and the gathers run 1.3-2x faster on a large shuffled cloud); every result is
+    # mapped back to the input's order at the end.
     perm = _spatial_order(P0)
-    P = P0[perm]
+    G = _point_graph_in_order(P0[perm], k, radius, symmetric, k_detect, names=perm)
+    # Back to the input's order: row v of the result is row inv[v] here, neighbours renamed.
+    inv = np.empty(N, np.int64)
+    inv[perm] = np.arange(N)
+    deg = np.diff(G.indptr)[inv]
+    ptr = np.zeros(N + 1, np.int64)
+    np.cumsum(deg, out=ptr[1:])
+    src = np.repeat(G.indptr[:-1][inv] - ptr[:-1], deg) + np.arange(ptr[-1])
+    back = lambda x: None if x is None else x[inv]      # noqa: E731
+    return PointGraph(ptr, perm[G.indices[src]], G.gap[inv], G.normal[inv], G.spacing[inv],
+                      G.detect_k, back(G.detect_gap), back(G.detect_spacing))
+
+
+def _point_graph_in_order(P: np.ndarray, k: int, radius, symmetric: bool, k_detect: int,
+                          names: np.ndarray) -> PointGraph:
+    """:func:`point_graph` computed in the points' own order (fast when it is spatially
+    coherent); ``names[i]`` is point ``i``'s index in the user's order (for messages)."""
+    N = P.shape[0]
     k_detect = min(k_detect, N - 1) if radius is None else 0
     dist, near = _nearest(P, max(k, k_detect)) if radius is None else (None, None)
     indptr, indices = knn_graph(P, k, radius=radius, symmetric=symmetric, nearest=near)
     deg = np.diff(indptr)
     if np.any(deg < 2):
-        lonely = np.sort(perm[deg < 2])
+        lonely = np.sort(names[deg < 2])
         raise PointCloudError(f"meshless_map: points {first_few(lonely)} have fewer than 2 neighbours; "
                               "increase k or radius.")
     starts = indptr[:-1]
@@ -261,15 +278,7 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     gap = np.maximum.reduceat(np.mod(ang[nxt] - ang, 2 * np.pi), starts)
     extra = ((k_detect,) + _gaps_of(P, dist[:, :k_detect], near[:, :k_detect], frame=(e1, e2))
              if k_detect else (0, None, None))
-    # Back to the input's order: row v of the result is row inv[v] here, neighbours renamed.
-    inv = np.empty(N, np.int64)
-    inv[perm] = np.arange(N)
-    deg_out = deg[inv]
-    ptr_out = np.zeros(N + 1, np.int64)
-    np.cumsum(deg_out, out=ptr_out[1:])
-    src = np.repeat(starts[inv] - ptr_out[:-1], deg_out) + np.arange(ptr_out[-1])
-    extra = extra[:1] + tuple(x if x is None else x[inv] for x in extra[1:])
-    return PointGraph(ptr_out, perm[indices[src]], gap[inv], normal[inv], spacing[inv], *extra)
+    return PointGraph(indptr, indices, gap, normal, spacing, *extra)
 
 
 def _global_frame(P: np.ndarray) -> np.ndarray:
@@ -631,7 +640,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     inv = np.empty_like(perm)
     inv[perm] = np.arange(perm.size)
     P = P0[perm]
-    graph = point_graph(P, k, radius=radius, symmetric=symmetric)
+    graph = _point_graph_in_order(P, k, radius, symmetric, 24, names=perm)
     clock("neighbours")
     if user_bnd is None:
         bnd = detect_boundary(P, graph, gap=gap)
