@@ -136,17 +136,20 @@ def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_deg
     phi = scale * (excl - excl[row_start])               # per-row exclusive cumsum, phi_0 = 0
     p = r[:, None] * jnp.stack([jnp.cos(phi), jnp.sin(phi)], -1)
     # Locate the edge [p_l, p_{l+1}] opposite each p_k: l is the last neighbour of the row with
-    # phi_l <= phi_k + pi (mod 2 pi); counted within the row, a short loop over the degree.
+    # phi_l <= phi_k + pi (mod 2 pi).  phi increases along each row, so a binary search within
+    # the row finds it in log2(max_degree) steps.
     target = jax.lax.stop_gradient(jnp.mod(phi + jnp.pi, 2 * jnp.pi))
     phi_c = jax.lax.stop_gradient(phi)
-    deg_k = row_end - row_start
 
-    def count(d, c):
-        j = jnp.minimum(row_start + d, row_end - 1)
-        return c + ((d < deg_k) & (phi_c[j] <= target)).astype(c.dtype)
+    def bisect(_, bounds):
+        lo, hi = bounds                                  # the answer lies in [lo, hi]
+        mid = (lo + hi) // 2
+        up = (lo < hi) & (phi_c[jnp.minimum(mid, row_end - 1)] <= target)
+        return jnp.where(up, mid + 1, lo), jnp.where(up | (lo >= hi), hi, mid)
 
-    l = row_start + jax.lax.fori_loop(0, max_degree, count, jnp.zeros_like(row_start)) - 1
-    l = jnp.clip(l, row_start, row_end - 1)
+    steps = max(1, int(max_degree).bit_length())
+    upper, _ = jax.lax.fori_loop(0, steps, bisect, (row_start, row_end))
+    l = jnp.clip(upper - 1, row_start, row_end - 1)
     m = jnp.where(l + 1 < row_end, l + 1, row_start)
     pk, pl, pm = p, p[l], p[m]
     cross = lambda a, b: a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
