@@ -476,11 +476,12 @@ def _system(graph: PointGraph, boundary: np.ndarray, N: int) -> _System:
     ent = np.flatnonzero(keep)
     center = rows_all[ent]
     nbr = graph.indices[ent]
-    k = np.arange(graph.indices.size)
-    start_all = graph.indptr[rows_all]
-    end_all = graph.indptr[rows_all + 1]
-    nxt_all = np.where(k + 1 >= end_all, start_all, k + 1)
-    prv_all = np.where(k - 1 < start_all, end_all - 1, k - 1)
+    # The entry after / before each one in its (cyclic) fan: the next / previous entry, but
+    # the first / last of the row at its ends (every row has at least two entries).
+    nxt_all = np.arange(1, graph.indices.size + 1)
+    nxt_all[graph.indptr[1:] - 1] = graph.indptr[:-1]
+    prv_all = np.arange(-1, graph.indices.size - 1)
+    prv_all[graph.indptr[:-1]] = graph.indptr[1:] - 1
     nxt = graph.indices[nxt_all[ent]]
     prev = graph.indices[prv_all[ent]]
     row = slot[center]
@@ -592,7 +593,9 @@ def _map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary
 
     vals, rhs = _assemble_jit(w, uv_b, S.rows_e, S.ii, S.ib, S.ib_slot, S.rows_e[S.ib], S.diag_pos,
                               S.off_pos, ni=S.n_rows, nnz=S.pattern.nnz)
-    x = sparse.solve(S.pattern, vals, rhs, symmetric=symmetric)
+    from .linear import _solve       # eager factorization when nothing is traced
+
+    x = _solve(S.pattern, vals, rhs, symmetric, "auto")
     return _scatter(x, uv_b, jnp.asarray(S.interior), jnp.asarray(bnd), n=N)
 
 
