@@ -679,6 +679,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
                                and radius is None))
     clock("weights_and_solve")
     F = _delaunay(U)
+    F = F[np.argsort(F.min(axis=1), kind="stable")]     # faces in the points' (Morton) order too
     clock("delaunay")
     if flip_rounds:
         F = _flip_towards_3d_delaunay(F, P, U, flip_rounds)
