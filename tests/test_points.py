@@ -109,6 +109,16 @@ def test_point_errors(tmp_path):
         jp.meshless_map(P, weights="cot")
     uv, bnd = jp.meshless_map(np.vstack([P, P[:2]]), merge_duplicates=True)
     assert uv.shape == (50, 2)
+    with pytest.raises(PointCloudError, match=r"points 50, 51 .*point 50 equals point 7"):
+        jp.meshless_map(np.vstack([P, P[[7, 7]]]))
+    with pytest.raises(PointCloudError, match="boundary must be 'circle' or 'square'"):
+        jp.meshless_map(P, boundary="plane")
+    with pytest.raises(PointCloudError, match="unknown spacing"):
+        jp.meshless_map(P, spacing="arc")
+    with pytest.raises(PointCloudError, match=r"unknown options \['kk'\]"):
+        jp.reconstruct_surface(P, kk=3)
+    with pytest.raises(PointCloudError, match="boundary_indices must be >= 3 distinct"):
+        jp.reconstruct_surface(P, boundary_indices=[0, 1, 1])
 
 
 def test_unreachable_cluster_is_reported():
