@@ -213,17 +213,23 @@ class PointGraph:
 
 
 def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: bool = True,
-                k_detect: int = 24) -> PointGraph:
+                k_detect: int = 24, max_slope: float = 0.6) -> PointGraph:
     """Neighbours, tangent planes and angularly sorted fans of every point; with ``k`` nearest
     neighbours, also the angular gaps of the ``k_detect`` nearest (for
-    :func:`detect_boundary`) from the same tree query (0 skips them)."""
+    :func:`detect_boundary`) from the same tree query (0 skips them).
+
+    Neighbour pairs that leave either point's tangent plane steeply (``|n . d| / |d| >
+    max_slope``, about 37 degrees by default) are dropped: on a part of the surface
+    thinner than the point spacing they join its two sides (camelhead.xyz's ears), and
+    the map folds that part onto itself.  ``max_slope=1`` keeps every pair."""
     P0 = np.asarray(points, np.float64)
     N = P0.shape[0]
     # Work in a space-filling-curve order, so that neighbours sit close in memory (the tree
     # query and the gathers run 1.3-2x faster on a large shuffled cloud); every result is
     # mapped back to the input's order at the end.
     perm = _spatial_order(P0)
-    G = _point_graph_in_order(P0[perm], k, radius, symmetric, k_detect, names=perm)
+    G = _point_graph_in_order(P0[perm], k, radius, symmetric, k_detect, names=perm,
+                              max_slope=max_slope)
     # Back to the input's order: row v of the result is row inv[v] here, neighbours renamed.
     inv = np.empty(N, np.int64)
     inv[perm] = np.arange(N)
@@ -237,20 +243,19 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
 
 
 def _point_graph_in_order(P: np.ndarray, k: int, radius, symmetric: bool, k_detect: int,
-                          names: np.ndarray) -> PointGraph:
+                          names: np.ndarray, max_slope: float = 0.6) -> PointGraph:
     """:func:`point_graph` computed in the points' own order (fast when it is spatially
     coherent); ``names[i]`` is point ``i``'s index in the user's order (for messages)."""
     N = P.shape[0]
     k_detect = min(k_detect, N - 1) if radius is None else 0
     dist, near = _nearest(P, max(k, k_detect)) if radius is None else (None, None)
     indptr, indices = knn_graph(P, k, radius=radius, symmetric=symmetric, nearest=near)
+    _check_degree(indptr, names, 2)
+    normal, e1, e2 = _frames(P, indptr, indices)
+    if max_slope < 1:
+        indptr, indices = _drop_steep(P, indptr, indices, normal, max_slope)
+        _check_degree(indptr, names, 2)
     deg = np.diff(indptr)
-    if np.any(deg < 2):
-        lonely = np.sort(names[deg < 2])
-        raise PointCloudError(f"meshless_map: points {first_few(lonely)} have fewer than 2 neighbours; "
-                              "increase k or radius.")
-    g = _global_frame(P)[2]
-    normal, e1, e2 = np.empty((N, 3)), np.empty((N, 3)), np.empty((N, 3))
     gap, spacing = np.empty(N), np.empty(N)
     fans = np.empty_like(indices)
     for r0 in range(0, N, _BLOCK):                 # blocks of rows: temporaries stay in cache
@@ -259,20 +264,8 @@ def _point_graph_in_order(P: np.ndarray, k: int, radius, symmetric: bool, k_dete
         ptr, dg, idx = indptr[r0:r1 + 1] - lo, deg[r0:r1], indices[lo:hi]
         starts = ptr[:-1]
         D = P[idx] - np.repeat(P[r0:r1], dg, axis=0)
-        # PCA normal of each neighbourhood (the point and its neighbours).  Rows are contiguous
-        # in CSR order and every point has >= 2 neighbours: reduceat sums them.
-        C = np.empty((r1 - r0, 3, 3))
-        for a in range(3):
-            for b in range(a, 3):
-                C[:, a, b] = C[:, b, a] = np.add.reduceat(D[:, a] * D[:, b], starts)
-        _, vecs = np.linalg.eigh(C)
-        # Orient normals consistently with the global best-fit plane's normal.
-        n_b = vecs[:, :, 0] * np.where(vecs[:, :, 0] @ g < 0, -1.0, 1.0)[:, None]
-        a1 = vecs[:, :, 2]
-        a2 = np.cross(n_b, a1)
-        normal[r0:r1], e1[r0:r1], e2[r0:r1] = n_b, a1, a2
-        ang = np.arctan2(np.einsum("ij,ij->i", D, np.repeat(a2, dg, axis=0)),
-                         np.einsum("ij,ij->i", D, np.repeat(a1, dg, axis=0)))
+        ang = np.arctan2(np.einsum("ij,ij->i", D, np.repeat(e2[r0:r1], dg, axis=0)),
+                         np.einsum("ij,ij->i", D, np.repeat(e1[r0:r1], dg, axis=0)))
         spacing[r0:r1] = np.add.reduceat(np.sqrt(np.einsum("ij,ij->i", D, D)), starts) / dg
         # One sort on a combined key (row, then angle): ang + pi lies in [0, 2 pi] < 8; np.lexsort
         # on two keys is 4x slower.
@@ -287,6 +280,55 @@ def _point_graph_in_order(P: np.ndarray, k: int, radius, symmetric: bool, k_dete
     extra = ((k_detect,) + _gaps_of(P, dist[:, :k_detect], near[:, :k_detect], frame=(e1, e2))
              if k_detect else (0, None, None))
     return PointGraph(indptr, indices, gap, normal, spacing, *extra)
+
+
+def _check_degree(indptr: np.ndarray, names: np.ndarray, least: int) -> None:
+    lonely = np.sort(names[np.diff(indptr) < least])
+    if lonely.size:
+        raise PointCloudError(f"meshless_map: points {first_few(lonely)} have fewer than {least} "
+                              "neighbours; increase k or radius.")
+
+
+def _frames(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray):
+    """Tangent frames ``(normal, e1, e2)``, each ``(N, 3)``: PCA of each point's neighbours
+    (CSR rows), normals turned towards the global best-fit plane's normal, right-handed."""
+    N = P.shape[0]
+    deg = np.diff(indptr)
+    g = _global_frame(P)[2]
+    normal, e1 = np.empty((N, 3)), np.empty((N, 3))
+    for r0 in range(0, N, _BLOCK):                 # blocks of rows: temporaries stay in cache
+        r1 = min(r0 + _BLOCK, N)
+        lo, hi = indptr[r0], indptr[r1]
+        D = P[indices[lo:hi]] - np.repeat(P[r0:r1], deg[r0:r1], axis=0)
+        # Rows are contiguous and every point has >= 2 neighbours: reduceat sums them.
+        starts = indptr[r0:r1] - lo
+        C = np.empty((r1 - r0, 3, 3))
+        for a in range(3):
+            for b in range(a, 3):
+                C[:, a, b] = C[:, b, a] = np.add.reduceat(D[:, a] * D[:, b], starts)
+        _, vecs = np.linalg.eigh(C)
+        normal[r0:r1] = vecs[:, :, 0] * np.where(vecs[:, :, 0] @ g < 0, -1.0, 1.0)[:, None]
+        e1[r0:r1] = vecs[:, :, 2]
+    return normal, e1, np.cross(normal, e1)
+
+
+def _drop_steep(P, indptr, indices, normal, max_slope: float):
+    """Remove the neighbour pairs ``v, w`` whose direction leaves either tangent plane by more
+    than ``|n . (w - v)| / |w - v| > max_slope``: on a thin part of the surface (an ear)
+    they join its two sides, and the map would fold that part onto itself.  Points that
+    would keep fewer than three neighbours keep all of theirs (pairs stay symmetric)."""
+    N = P.shape[0]
+    rows = np.repeat(np.arange(N), np.diff(indptr))
+    d = P[indices] - P[rows]
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    slope = np.maximum(np.abs(np.einsum("ij,ij->i", d, normal[rows])),
+                       np.abs(np.einsum("ij,ij->i", d, normal[indices]))) / length
+    keep = slope <= max_slope
+    weak = np.bincount(rows[keep], minlength=N) < 3
+    keep |= weak[rows] | weak[indices]
+    ptr = np.zeros(N + 1, np.int64)
+    np.cumsum(np.bincount(rows[keep], minlength=N), out=ptr[1:])
+    return ptr, indices[keep]
 
 
 def _global_frame(P: np.ndarray) -> np.ndarray:
@@ -522,7 +564,7 @@ def _check_solvable(S: _System, N: int, boundary: np.ndarray) -> None:
 def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boundary="circle",
                  spacing: str = "chord", boundary_indices=None, radius: float | None = None,
                  symmetric: bool = True, gap: float = 0.7 * np.pi, graph: PointGraph | None = None,
-                 merge_duplicates: bool = False):
+                 merge_duplicates: bool = False, max_slope: float = 0.6):
     """Meshless parameterization of unorganized points (survey §8).
 
     **Arguments:** ``points: (N, 3)`` (numpy, JAX or a tracer with ``graph`` given);
@@ -530,7 +572,8 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
     ``boundary`` ``"circle"`` or ``"square"``; ``boundary_indices`` the ordered
     boundary points (default: detected); ``graph`` a precomputed
     :func:`point_graph` (needed under ``jax.grad``: neighbourhoods are topology,
-    computed from concrete points).
+    computed from concrete points); ``max_slope`` drops neighbour pairs that leave
+    the tangent planes steeply (see :func:`point_graph`).
 
     **Returns:** ``(uv (N, 2), boundary (b,) int)``.
 
@@ -559,12 +602,12 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
         Pc, kept = check_points(points, k=k, merge_duplicates=merge_duplicates)
         if kept.size != np.asarray(points).shape[0]:
             uv, bnd = meshless_map(Pc, k=k, weights=weights, boundary=boundary, spacing=spacing,
-                                   radius=radius, symmetric=symmetric, gap=gap)
+                                   radius=radius, symmetric=symmetric, gap=gap, max_slope=max_slope)
             return uv, kept[bnd]
         N = Pc.shape[0]
         P = points if isinstance(points, jax.Array) else Pc
         if graph is None:
-            graph = point_graph(Pc, k, radius=radius, symmetric=symmetric)
+            graph = point_graph(Pc, k, radius=radius, symmetric=symmetric, max_slope=max_slope)
     if boundary_indices is None:
         bnd = detect_boundary(np.asarray(P), graph, gap=gap)
     else:
@@ -646,6 +689,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     boundary, spacing = options.pop("boundary", "circle"), options.pop("spacing", "chord")
     gap, user_bnd = options.pop("gap", 0.7 * np.pi), options.pop("boundary_indices", None)
     merge = options.pop("merge_duplicates", False)
+    max_slope = options.pop("max_slope", 0.6)
     if options:
         raise PointCloudError(f"reconstruct_surface: unknown options {sorted(options)}.")
     if weights not in WEIGHTS:
@@ -662,7 +706,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     inv = np.empty_like(perm)
     inv[perm] = np.arange(perm.size)
     P = P0[perm]
-    graph = _point_graph_in_order(P, k, radius, symmetric, 24, names=perm)
+    graph = _point_graph_in_order(P, k, radius, symmetric, 24, names=perm, max_slope=max_slope)
     clock("neighbours")
     if user_bnd is None:
         bnd = detect_boundary(P, graph, gap=gap)
@@ -689,7 +733,8 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     too_long = L.max(1) > bridge_factor * local
     # Peel in one pass: the too-long faces connected to the outside through too-long faces.
     keep = ~_outside_bridges(F, too_long, len(P))
-    F, topology = _largest_manifold_disk(F[keep], len(P))
+    F = _peel_ears(F[keep], P, graph.normal)
+    F, topology = _largest_manifold_disk(F, len(P))
     n_in = np.asarray(points).shape[0]
     V = np.asarray(points, np.float64) if kept.size == n_in else P0
     mesh = TriMesh(V, None, renumber(topology, perm), uv=U[inv], validate=False,
@@ -833,6 +878,68 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
         changed = np.concatenate([g1, g2]) // 3
         angles.reshape(m, 3)[changed] = _face_angles(P, F[changed])
         cand = np.concatenate([g1, g1 + 1, g1 + 2, g2, g2 + 1, g2 + 2, lost])
+    return F
+
+
+def _peel_ears(F: np.ndarray, P: np.ndarray, normal: np.ndarray, *, min_angle: float = 0.45 * np.pi,
+               k: int = 24, rounds: int = 3) -> np.ndarray:
+    """Remove boundary "ears" that cover empty space: a face ``(b1, b2, p)`` whose edge
+    ``b1-b2`` is on the boundary and whose third vertex ``p`` is not, when none of ``p``'s
+    ``k`` nearest points lies inside the face's angle at ``p`` (seen in ``p``'s tangent
+    plane) and that angle is at least ``min_angle``.  Such a face spans a concave notch of
+    the boundary whose point ``p`` the boundary detection missed; peeling it puts ``p`` on
+    the boundary.  Each round peels faces with no vertex in common, so the result stays a
+    manifold disk."""
+    n = len(P)
+    tree = None
+    for _ in range(rounds):
+        src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
+        key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
+        order = np.argsort(key, kind="stable")
+        ks = key[order]
+        single = np.ones(key.size, bool)
+        dup = np.flatnonzero(ks[1:] == ks[:-1])
+        single[dup] = single[dup + 1] = False
+        bd = order[single]                                  # boundary half-edges
+        on_bd = np.zeros(n, bool)
+        on_bd[src[bd]] = True
+        h = bd[~on_bd[opp[bd]]]
+        faces = h // 3
+        h = h[np.bincount(faces, minlength=len(F))[faces] == 1]   # one boundary edge only
+        if h.size == 0:
+            break
+        b1, b2, p = src[h], dst[h], opp[h]
+        if tree is None:
+            tree = cKDTree(P)
+        near = tree.query(P[p], k + 1)[1][:, 1:]
+        nrm = normal[p]
+        ref = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+        e1 = np.cross(nrm, ref)
+        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+        e2 = np.cross(nrm, e1)
+
+        def angle(q):                                       # (c, m) angles of points q around p
+            d = P[q] - P[p][:, None, :]
+            return np.arctan2(np.einsum("cmd,cd->cm", d, e2), np.einsum("cmd,cd->cm", d, e1))
+
+        t1, t2 = angle(b1[:, None])[:, 0], angle(b2[:, None])[:, 0]
+        width = np.mod(t2 - t1, 2 * np.pi)
+        start = np.where(width > np.pi, t2, t1)
+        width = np.where(width > np.pi, 2 * np.pi - width, width)
+        rel = np.mod(angle(near) - start[:, None], 2 * np.pi)
+        others = (near != b1[:, None]) & (near != b2[:, None])
+        inside = others & (rel > 1e-6) & (rel < width[:, None] - 1e-6)
+        ear = np.flatnonzero((width >= min_angle) & ~inside.any(axis=1))
+        if ear.size == 0:
+            break
+        # Independent: no two peeled faces share a vertex in this round.
+        verts = np.stack([b1[ear], b2[ear], p[ear]], 1)
+        first = np.full(n, ear.size)
+        np.minimum.at(first, verts.reshape(-1), np.repeat(np.arange(ear.size), 3))
+        ok = np.all(first[verts] == np.arange(ear.size)[:, None], axis=1)
+        drop = np.zeros(len(F), bool)
+        drop[h[ear[ok]] // 3] = True
+        F = F[~drop]
     return F
 
 
