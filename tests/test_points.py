@@ -284,3 +284,19 @@ def test_camelhead_points_dropping_steep_pairs_brings_faces_to_the_surface():
     rms, mx = distances(rec)
     assert rms < 0.9 * rms1 and mx <= max1 * (1 + 1e-9)
     assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
+
+
+def test_an_ear_over_a_missed_boundary_point_is_peeled():
+    # A 21 x 21 grid whose top-middle point sits in a shallow notch: the Delaunay hull bridges
+    # the notch with one face whose apex angle (~136 degrees) covers empty space.
+    g = np.linspace(0, 1, 21)
+    xy = np.column_stack([a.ravel() for a in np.meshgrid(g, g)])
+    apex = int(np.flatnonzero(np.all(np.isclose(xy, [0.5, 1.0]), axis=1))[0])
+    xy[apex] = [0.5, 0.98]
+    P = np.column_stack([xy, 0.1 * np.sin(3 * xy[:, 0])])
+    F = PT._delaunay(xy)
+    G = PT._peel_ears(F, P, PT.point_graph(P, 10))
+    gone = {tuple(f) for f in np.sort(F, 1).tolist()} - {tuple(f) for f in np.sort(G, 1).tolist()}
+    assert len(gone) == 1 and apex in next(iter(gone))
+    t = jp.TriMesh(P, G).topology
+    assert t.is_disk and apex in t.boundary_loops[0]
