@@ -896,22 +896,23 @@ def _peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: fl
     the boundary whose point ``p`` the boundary detection missed; peeling it puts ``p`` on
     the boundary.  Each round peels faces with no vertex in common, so the result stays a
     manifold disk."""
-    n = len(P)
+    n, m = len(P), len(F)
     deg = np.diff(graph.indptr)
+    src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
+    key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
+    order = np.argsort(key, kind="stable")
+    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+    twin = np.full(3 * m, -1, np.int64)
+    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    alive = np.ones(m, bool)
     for _ in range(rounds):
-        src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
-        key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
-        order = np.argsort(key, kind="stable")
-        ks = key[order]
-        single = np.ones(key.size, bool)
-        dup = np.flatnonzero(ks[1:] == ks[:-1])
-        single[dup] = single[dup + 1] = False
-        bd = order[single]                                  # boundary half-edges
+        # Boundary half-edges: alive, with no alive face across.
+        bd = np.flatnonzero(np.repeat(alive, 3) & ((twin < 0) | ~alive[np.maximum(twin, 0) // 3]))
         on_bd = np.zeros(n, bool)
         on_bd[src[bd]] = True
         h = bd[~on_bd[opp[bd]]]
         faces = h // 3
-        h = h[np.bincount(faces, minlength=len(F))[faces] == 1]   # one boundary edge only
+        h = h[np.bincount(faces, minlength=m)[faces] == 1]   # one boundary edge only
         if h.size == 0:
             break
         b1, b2, p = src[h], dst[h], opp[h]
@@ -945,10 +946,8 @@ def _peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: fl
         first = np.full(n, ear.size)
         np.minimum.at(first, verts.reshape(-1), np.repeat(np.arange(ear.size), 3))
         ok = np.all(first[verts] == np.arange(ear.size)[:, None], axis=1)
-        drop = np.zeros(len(F), bool)
-        drop[h[ear[ok]] // 3] = True
-        F = F[~drop]
-    return F
+        alive[h[ear[ok]] // 3] = False
+    return F[alive]
 
 
 def _outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
