@@ -23,9 +23,15 @@ Pipeline (numpy for the combinatorics, JAX for what depends on coordinates):
 5. The boundary on a circle or square (chord length), the interior by the same
    differentiable sparse solve as meshes (:func:`jaxparam.sparse.solve`).
 
+Step 2 also drops neighbour pairs that leave a tangent plane steeply (they
+join the two sides of parts thinner than the spacing).  Large clouds are
+processed in Morton (Z-curve) order and in blocks of points, for memory
+locality; results come back in the input's order.
+
 :func:`reconstruct_surface` triangulates the parameter points (Delaunay),
-lifts the triangles to 3D and peels off the hull triangles that bridge
-concave parts of the boundary.
+lifts the triangles to 3D, flips edges towards 3D Delaunay where the
+parameter plane allows, peels off the hull triangles that bridge concave
+parts of the boundary and the ears over boundary points the detector missed.
 """
 from __future__ import annotations
 
