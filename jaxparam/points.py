@@ -52,7 +52,7 @@ from . import sparse
 from .errors import MeshFileError, PointCloudError, first_few
 from .geometry import safe_norm
 from .mesh import TriMesh
-from .topology import renumber
+from .topology import permute_rows, renumber
 
 __all__ = ["load_points", "check_points", "knn_graph", "PointGraph", "point_graph",
            "detect_boundary", "meshless_map", "reconstruct_surface", "WEIGHTS"]
@@ -226,8 +226,8 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
 
     Neighbour pairs that leave either point's tangent plane steeply (``|n . d| / |d| >
     max_slope``, about 37 degrees by default) are dropped: on a part of the surface
-    thinner than the point spacing they join its two sides (camelhead.xyz's ears), and
-    the map folds that part onto itself.  ``max_slope=1`` keeps every pair."""
+    thinner than the point spacing they join its two sides (a thin part of
+    camelhead.xyz's head), and the map folds that part onto itself.  ``max_slope=1`` keeps every pair."""
     P0 = np.asarray(points, np.float64)
     N = P0.shape[0]
     # Work in a space-filling-curve order, so that neighbours sit close in memory (the tree
@@ -239,10 +239,7 @@ def point_graph(points, k: int = 10, *, radius: float | None = None, symmetric: 
     # Back to the input's order: row v of the result is row inv[v] here, neighbours renamed.
     inv = np.empty(N, np.int64)
     inv[perm] = np.arange(N)
-    deg = np.diff(G.indptr)[inv]
-    ptr = np.zeros(N + 1, np.int64)
-    np.cumsum(deg, out=ptr[1:])
-    src = np.repeat(G.indptr[:-1][inv] - ptr[:-1], deg) + np.arange(ptr[-1])
+    ptr, src = permute_rows(G.indptr, inv)
     back = lambda x: None if x is None else x[inv]      # noqa: E731
     return PointGraph(ptr, perm[G.indices[src]], G.gap[inv], G.normal[inv], G.spacing[inv],
                       G.detect_k, back(G.detect_gap), back(G.detect_spacing))
@@ -598,13 +595,7 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
 
         uv, bnd = jp.meshless_map(points, k=10, weights="inverse_distance")
     """
-    if weights not in WEIGHTS:
-        raise PointCloudError(f"meshless_map: unknown weights {weights!r}; use one of {WEIGHTS}.")
-    if not isinstance(boundary, str) or boundary not in ("circle", "square"):
-        raise PointCloudError(f"meshless_map: boundary must be 'circle' or 'square', got {boundary!r}; "
-                              "to choose the boundary points pass boundary_indices.")
-    if spacing not in bmap.SPACINGS:
-        raise PointCloudError(f"meshless_map: unknown spacing {spacing!r}; use one of {bmap.SPACINGS}.")
+    _check_map_options("meshless_map", weights, boundary, spacing)
     traced = isinstance(points, jax.core.Tracer)
     if traced:
         if graph is None or boundary_indices is None:
@@ -625,13 +616,29 @@ def meshless_map(points, *, k: int = 10, weights: str = "inverse_distance", boun
     if boundary_indices is None:
         bnd = detect_boundary(np.asarray(P), graph, gap=gap)
     else:
-        bnd = np.asarray(boundary_indices, np.int64)
-        if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= N or np.unique(bnd).size != bnd.size:
-            raise PointCloudError(f"meshless_map: boundary_indices must be >= 3 distinct point indices "
-                                  f"in [0, {N}), in order; got {bnd.size} values.")
+        bnd = _check_boundary_indices("meshless_map", boundary_indices, N)
     sym = weights in ("uniform", "inverse_distance") and symmetric and radius is None
     return _map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
                        symmetric=sym), bnd
+
+
+def _check_map_options(where: str, weights, boundary, spacing) -> None:
+    if weights not in WEIGHTS:
+        raise PointCloudError(f"{where}: unknown weights {weights!r}; use one of {WEIGHTS}.")
+    if not isinstance(boundary, str) or boundary not in ("circle", "square"):
+        raise PointCloudError(f"{where}: boundary must be 'circle' or 'square', got {boundary!r}; "
+                              "to choose the boundary points pass boundary_indices.")
+    if spacing not in bmap.SPACINGS:
+        raise PointCloudError(f"{where}: unknown spacing {spacing!r}; use one of {bmap.SPACINGS}.")
+
+
+def _check_boundary_indices(where: str, indices, n: int) -> np.ndarray:
+    """User boundary indices as ``(b,) int64``, or a :class:`PointCloudError`."""
+    bnd = np.asarray(indices, np.int64)
+    if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= n or np.unique(bnd).size != bnd.size:
+        raise PointCloudError(f"{where}: boundary_indices must be >= 3 distinct point indices "
+                              f"in [0, {n}), in order; got {bnd.size} values.")
+    return bnd
 
 
 def _map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary: str, spacing: str,
@@ -706,11 +713,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     max_slope = options.pop("max_slope", 0.6)
     if options:
         raise PointCloudError(f"reconstruct_surface: unknown options {sorted(options)}.")
-    if weights not in WEIGHTS:
-        raise PointCloudError(f"reconstruct_surface: unknown weights {weights!r}; use one of {WEIGHTS}.")
-    if boundary not in ("circle", "square") or spacing not in bmap.SPACINGS:
-        raise PointCloudError(f"reconstruct_surface: boundary must be 'circle' or 'square' and spacing "
-                              f"one of {bmap.SPACINGS}; got {boundary!r}, {spacing!r}.")
+    _check_map_options("reconstruct_surface", weights, boundary, spacing)
     clock = _StageClock()
     P0, kept = check_points(points, k=k, merge_duplicates=merge)
     # Everything below runs on the points in Morton order (neighbours close in memory: the
@@ -726,12 +729,7 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
         bnd = detect_boundary(P, graph, gap=gap)
         clock("boundary")
     else:
-        bnd = np.asarray(user_bnd, np.int64)
-        if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= P.shape[0] \
-                or np.unique(bnd).size != bnd.size:
-            raise PointCloudError(f"reconstruct_surface: boundary_indices must be >= 3 distinct point "
-                                  f"indices in [0, {P.shape[0]}), in order; got {bnd.size} values.")
-        bnd = inv[bnd]
+        bnd = inv[_check_boundary_indices("reconstruct_surface", user_bnd, P.shape[0])]
     U = np.asarray(_map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
                                symmetric=weights in ("uniform", "inverse_distance") and symmetric
                                and radius is None))
@@ -796,13 +794,19 @@ def _orient(U, a, b, c):
     return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
 
 
-def _corner_angle(P, at, u, v):
-    """3D angle at ``at`` between the directions to ``u`` and ``v`` (radians)."""
-    x, y = P[u] - P[at], P[v] - P[at]
+def _cross_norm(x, y):
+    """``|x_i x y_i|`` for rows of ``(m, 3)`` arrays (explicit components: np.cross and
+    np.linalg.norm are 2x slower here)."""
     cx = x[:, 1] * y[:, 2] - x[:, 2] * y[:, 1]
     cy = x[:, 2] * y[:, 0] - x[:, 0] * y[:, 2]
     cz = x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]
-    return np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), np.einsum("ij,ij->i", x, y))
+    return np.sqrt(cx * cx + cy * cy + cz * cz)
+
+
+def _corner_angle(P, at, u, v):
+    """3D angle at ``at`` between the directions to ``u`` and ``v`` (radians)."""
+    x, y = P[u] - P[at], P[v] - P[at]
+    return np.arctan2(_cross_norm(x, y), np.einsum("ij,ij->i", x, y))
 
 
 def _face_angles(P, F):
@@ -810,13 +814,22 @@ def _face_angles(P, F):
     X0, X1, X2 = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
     a, b, c = X1 - X0, X2 - X1, X0 - X2
     # |e x f| at every corner is twice the area: one cross product serves all three angles.
-    cx = a[:, 1] * c[:, 2] - a[:, 2] * c[:, 1]
-    cy = a[:, 2] * c[:, 0] - a[:, 0] * c[:, 2]
-    cz = a[:, 0] * c[:, 1] - a[:, 1] * c[:, 0]
-    area2 = np.sqrt(cx * cx + cy * cy + cz * cz)
+    area2 = _cross_norm(a, c)
     dots = -np.stack([np.einsum("ij,ij->i", a, c), np.einsum("ij,ij->i", b, a),
                       np.einsum("ij,ij->i", c, b)], axis=1)
     return np.arctan2(area2[:, None], dots)
+
+
+def _twins(F: np.ndarray, n: int) -> np.ndarray:
+    """``(3m,)``: the half-edge running the other way along each half-edge ``h = 3 f + j``
+    (from ``F[f, j]`` to ``F[f, j+1]``) of a manifold triangulation, ``-1`` on the boundary."""
+    src, dst = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
+    order = np.argsort(key, kind="stable")
+    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+    twin = np.full(key.size, -1, np.int64)
+    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    return twin
 
 
 def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int) -> np.ndarray:
@@ -834,12 +847,7 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
     F = np.array(F, np.int64)
     m = len(F)
     Ff = F.reshape(-1)                      # a view: writes to F show here
-    dst = F[:, [1, 2, 0]].reshape(-1)
-    key = np.minimum(Ff, dst) * np.int64(len(P)) + np.maximum(Ff, dst)
-    order = np.argsort(key)
-    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
-    twin = np.full(3 * m, -1, np.int64)
-    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    twin = _twins(F, len(P))
     cand = np.flatnonzero(twin > np.arange(3 * m))
     angles = _face_angles(P, F).reshape(-1)             # angles[h]: at corner h % 3 of face h // 3
 
@@ -901,18 +909,14 @@ def _peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: fl
     ``b1-b2`` is on the boundary and whose third vertex ``p`` is not, when none of ``p``'s
     neighbours in ``graph`` lies inside the face's angle at ``p`` (seen in ``p``'s tangent
     plane) and that angle is at least ``min_angle`` (regular boundary faces have apex
-    angles near 45 or 60 degrees; on camelhead.xyz exactly the three ears reach 81).  Such a face spans a concave notch of
-    the boundary whose point ``p`` the boundary detection missed; peeling it puts ``p`` on
-    the boundary.  Each round peels faces with no vertex in common, so the result stays a
+    angles near 45 or 60 degrees; on camelhead.xyz exactly the three ears reach 81).  Such
+    a face spans a concave notch of the boundary whose point ``p`` the boundary detection
+    missed; peeling it puts ``p`` on the boundary.  Each round peels faces with no vertex in common, so the result stays a
     manifold disk."""
     n, m = len(P), len(F)
     deg = np.diff(graph.indptr)
     src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
-    key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
-    order = np.argsort(key, kind="stable")
-    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
-    twin = np.full(3 * m, -1, np.int64)
-    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    twin = _twins(F, n)
     alive = np.ones(m, bool)
     for _ in range(rounds):
         # Boundary half-edges: alive, with no alive face across.
@@ -962,18 +966,11 @@ def _peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: fl
 def _outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
     """Faces flagged ``bad`` that reach the triangulation's outside through bad faces only."""
     m = len(F)
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    f = np.tile(np.arange(m), 3)
-    key = np.minimum(e[:, 0], e[:, 1]) * np.int64(n) + np.maximum(e[:, 0], e[:, 1])
-    order = np.argsort(key, kind="stable")
-    ks, fs = key[order], f[order]
-    pair = np.flatnonzero(ks[1:] == ks[:-1])
-    a, b = fs[pair], fs[pair + 1]
+    twin = _twins(F, n)
+    h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
+    a, b = h // 3, twin[h] // 3
     both = bad[a] & bad[b]
-    single = np.ones(ks.size, bool)
-    single[pair] = False
-    single[pair + 1] = False
-    hull_faces = np.unique(fs[single])
+    hull_faces = np.unique(np.flatnonzero(twin < 0) // 3)
     hull_faces = hull_faces[bad[hull_faces]]
     out = m
     rows = np.concatenate([a[both], b[both], np.full(hull_faces.size, out)])

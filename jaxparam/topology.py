@@ -27,6 +27,8 @@ __all__ = [
     "build",
     "boundary_loops",
     "check_faces",
+    "renumber",
+    "permute_rows",
 ]
 
 
@@ -399,6 +401,18 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
         genus=int(genus), dividing_edges=dividing)
 
 
+def permute_rows(indptr: np.ndarray, old_of: np.ndarray):
+    """Reorder the rows of a CSR structure: new row ``r`` is old row ``old_of[r]``.
+
+    **Returns:** ``(indptr (n+1,), src (nnz,))``, ``src`` the old position of each new
+    entry (gather any per-entry array with it).
+    """
+    deg = np.diff(indptr)[old_of]
+    ptr = np.zeros(old_of.size + 1, np.int64)
+    np.cumsum(deg, out=ptr[1:])
+    return ptr, np.repeat(indptr[:-1][old_of] - ptr[:-1], deg) + np.arange(ptr[-1])
+
+
 def renumber(t: Topology, new_id: np.ndarray) -> Topology:
     """The same topology with vertex ``v`` renamed ``new_id[v]`` (a permutation of
     ``range(n)``); equal, field by field, to :func:`build` of the renamed faces, at a third
@@ -415,10 +429,7 @@ def renumber(t: Topology, new_id: np.ndarray) -> Topology:
     edges = e[order]
     ef = np.where(swap[:, None], t.edge_faces[:, ::-1], t.edge_faces)[order]
     # One-rings: row r is the old row old_of[r], its entries renamed.
-    deg = np.diff(t.ring_ptr)[old_of]
-    ring_ptr = np.zeros(n + 1, np.int64)
-    np.cumsum(deg, out=ring_ptr[1:])
-    src = np.repeat(t.ring_ptr[:-1][old_of] - ring_ptr[:-1], deg) + np.arange(ring_ptr[-1])
+    ring_ptr, src = permute_rows(t.ring_ptr, old_of)
     ren = lambda a: np.where(a >= 0, new_id[np.maximum(a, 0)], -1)   # noqa: E731
     is_boundary, referenced = t.is_boundary[old_of], t.referenced[old_of]
     interior = np.flatnonzero(referenced & ~is_boundary)
@@ -440,7 +451,7 @@ def renumber(t: Topology, new_id: np.ndarray) -> Topology:
     return Topology(
         n_vertices=n, faces=new_id[t.faces], edges=edges, edge_faces=ef, boundary_loops=tuple(loops),
         ring_ptr=ring_ptr, ring_idx=new_id[t.ring_idx[src]], ring_prev=ren(t.ring_prev[src]),
-        ring_next=ren(t.ring_next[src]), ring_row=np.repeat(np.arange(n), deg),
+        ring_next=ren(t.ring_next[src]), ring_row=np.repeat(np.arange(n), np.diff(ring_ptr)),
         ring_wedge=t.ring_wedge[src], is_boundary=is_boundary, referenced=referenced,
         interior=interior, boundary=boundary, slot=slot, components=comp,
         n_components=t.n_components, euler=t.euler, genus=t.genus, dividing_edges=edges[both])
