@@ -51,6 +51,7 @@ from . import boundary as bmap
 from . import sparse
 from .errors import MeshFileError, PointCloudError, first_few
 from .geometry import safe_norm
+from .memory import reuse_freed_memory
 from .mesh import TriMesh
 from .topology import permute_rows, renumber
 
@@ -714,6 +715,15 @@ def reconstruct_surface(points, *, bridge_factor: float = 3.0, flip_rounds: int 
     if options:
         raise PointCloudError(f"reconstruct_surface: unknown options {sorted(options)}.")
     _check_map_options("reconstruct_surface", weights, boundary, spacing)
+    with reuse_freed_memory(np.shape(points)[0] if np.ndim(points) == 2 else 0):
+        return _reconstruct(points, k=k, radius=radius, symmetric=symmetric, weights=weights,
+                            boundary=boundary, spacing=spacing, gap=gap, user_bnd=user_bnd,
+                            merge=merge, max_slope=max_slope, bridge_factor=bridge_factor,
+                            flip_rounds=flip_rounds)
+
+
+def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, gap, user_bnd, merge,
+                 max_slope, bridge_factor, flip_rounds) -> TriMesh:
     clock = _StageClock()
     P0, kept = check_points(points, k=k, merge_duplicates=merge)
     # Everything below runs on the points in Morton order (neighbours close in memory: the
