@@ -29,6 +29,8 @@ from .energies import ENERGIES, Energy, energy  # noqa: E402
 from .optimize import MinimizeResult, minimize  # noqa: E402
 from .points import load_points, meshless_map, reconstruct_surface  # noqa: E402
 from .fitting import fit_surface  # noqa: E402
+from . import wavelets  # noqa: E402
+from .remesh import remesh  # noqa: E402  (the function; the module is jaxparam.remesh in sys.modules)
 
 __version__ = "0.1.0"
 
@@ -39,5 +41,5 @@ __all__ = [
     "errors", "tol", "topology", "geometry", "boundary", "weights", "sparse", "linear",
     "metrics", "shapes", "energies", "optimize", "energy", "Energy", "ENERGIES", "minimize",
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
-    "fitting", "fit_surface", "plot",
+    "fitting", "fit_surface", "plot", "remesh", "wavelets",
 ]

@@ -233,6 +233,83 @@ def _add_points_commands(sub) -> None:
     p.set_defaults(func=cmd_fit)
 
 
+def cmd_remesh(args) -> int:
+    from .linear import convex_map
+    from .mesh import load, save
+    from .remesh import remesh
+
+    _enable_compile_cache()
+    seconds = {}
+    t = time.perf_counter()
+    mesh = load(args.mesh)
+    seconds["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    uv = convex_map(mesh, weights=_py(args.weights), boundary=args.boundary)
+    seconds["parameterize"] = time.perf_counter() - t
+    t = time.perf_counter()
+    semi = remesh(mesh, uv, levels=args.levels, corners=args.base_faces)
+    seconds["remesh"] = time.perf_counter() - t
+    save(args.output, semi, semi.uv)
+    rep = report_dict(semi, semi.uv, seconds=seconds, extra={
+        "levels": args.levels, "base_faces": int(semi.base_faces.shape[0]),
+        "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces})
+    if args.report:
+        write_json(args.report, rep)
+    if args.plot:
+        from .plot import plot_remesh
+
+        plot_remesh(semi, args.plot)
+    print(f"{args.output}: {semi.n_vertices} vertices, {semi.n_faces} faces, subdivision connectivity "
+          f"of order {args.levels} over {semi.base_faces.shape[0]} base faces")
+    return EXIT_OK
+
+
+def cmd_compress(args) -> int:
+    import numpy as np
+
+    from .mesh import load, save
+    from .wavelets import compress
+
+    t = time.perf_counter()
+    mesh = load(args.mesh)
+    small = compress(mesh, args.keep, wavelet=args.wavelet)
+    seconds = {"compress": time.perf_counter() - t}
+    save(args.output, small, mesh.uv)
+    V, X = np.asarray(mesh.vertices), np.asarray(small.vertices)
+    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    err = np.linalg.norm(X - V, axis=1)
+    rep = {"vertices": small.n_vertices, "faces": small.n_faces, "levels": small.hierarchy.levels,
+           "coefficients_kept": small.kept, "stored_fraction": small.stored_fraction,
+           "max_error": float(err.max() / diag), "rms_error": float(np.sqrt(np.mean(err ** 2)) / diag),
+           "wavelet": args.wavelet, "seconds": seconds}
+    if args.report:
+        write_json(args.report, rep)
+    print(f"{args.output}: kept {small.kept} coefficients, {100 * small.stored_fraction:.2f} % of the "
+          f"vertices' data; error max {100 * rep['max_error']:.3f} %, RMS {100 * rep['rms_error']:.3f} % "
+          "of the bounding-box diagonal")
+    return EXIT_OK
+
+
+def _add_remesh_commands(sub) -> None:
+    p = sub.add_parser("remesh", help="remesh a disk mesh with subdivision connectivity")
+    p.add_argument("mesh")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--levels", type=int, default=4)
+    p.add_argument("--base-faces", type=int, default=6, help="triangles of the base domain (a fan)")
+    p.add_argument("--weights", choices=WEIGHTS, default="shape-preserving")
+    p.add_argument("--boundary", choices=["circle", "square"], default="circle")
+    p.add_argument("--report")
+    p.add_argument("--plot")
+    p.set_defaults(func=cmd_remesh)
+    p = sub.add_parser("compress", help="wavelet compression of a mesh made by jaxparam remesh")
+    p.add_argument("mesh")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--keep", type=float, required=True, help="fraction of wavelet coefficients kept")
+    p.add_argument("--wavelet", choices=["lazy", "lifted"], default="lifted")
+    p.add_argument("--report")
+    p.set_defaults(func=cmd_compress)
+
+
 def _add_flatten_options(p) -> None:
     p.add_argument("--weights", choices=WEIGHTS, default="shape-preserving")
     p.add_argument("--boundary", choices=BOUNDARIES, default="circle")
@@ -266,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Functions ``f(subparsers)`` that add further subcommands (points, remeshing, ...).
-_EXTENSIONS: list = [_add_points_commands]
+_EXTENSIONS: list = [_add_points_commands, _add_remesh_commands]
 
 
 def _add_batch_command(sub) -> None:

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import metrics
 
-__all__ = ["plot_uv", "plot_checkerboard", "plot_isocurves"]
+__all__ = ["plot_uv", "plot_checkerboard", "plot_isocurves", "plot_remesh"]
 
 
 def _figure(size=(6, 6)):
@@ -129,4 +129,40 @@ def plot_isocurves(surface: Surface, path, *, lines: int = 12, samples: int = 20
     _equal_axes_3d(ax, np.concatenate(pts))
     ax.set_axis_off()
     ax.set_title(title or f"iso-parameter curves of the {surface.kind} surface")
+    return _save(plt, fig, path)
+
+
+def plot_remesh(semi, path, *, title: str | None = None, elev: float = 30, azim: float = -60):
+    """Two panels: the remesh on the surface, its faces shaded and coloured by the base
+    triangle they come from, with edges drawn; and its parameter domain ``semi.uv``
+    (the refined base domain ``T^j``).  ``semi`` is a :func:`jaxparam.remesh` result."""
+    from matplotlib.collections import PolyCollection
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    V = np.asarray(semi.vertices, np.float64)
+    U = np.asarray(semi.uv, np.float64)
+    F = semi.faces
+    base_of = np.arange(F.shape[0]) // (4 ** semi.hierarchy.levels)   # children follow their parent
+    P = V[F]
+    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    light = 0.55 + 0.45 * np.abs(n @ np.array([0.3, -0.4, 0.85]) / np.linalg.norm([0.3, -0.4, 0.85]))
+    palette = np.array([[0.95, 0.6, 0.1], [0.15, 0.3, 0.7], [0.3, 0.65, 0.3], [0.8, 0.25, 0.3],
+                        [0.55, 0.4, 0.75], [0.2, 0.6, 0.7]])
+    colors = np.clip(palette[base_of % len(palette)] * light[:, None], 0, 1)
+    plt, fig = _figure((12, 6))
+    ax = fig.add_subplot(121, projection="3d")
+    ax.add_collection3d(Poly3DCollection(P, facecolors=colors, edgecolors="k", linewidths=0.1))
+    _equal_axes_3d(ax, V)
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_axis_off()
+    ax.set_title(title or f"remesh: {F.shape[0]} faces, subdivision connectivity of order "
+                 f"{semi.hierarchy.levels}")
+    ax2 = fig.add_subplot(122)
+    ax2.add_collection(PolyCollection(U[F], facecolors=palette[base_of % len(palette)],
+                                      edgecolors="k", linewidths=0.1))
+    ax2.set_xlim(U[:, 0].min(), U[:, 0].max())
+    ax2.set_ylim(U[:, 1].min(), U[:, 1].max())
+    ax2.set_aspect("equal")
+    ax2.set_title("parameter domain: the refined base domain")
     return _save(plt, fig, path)

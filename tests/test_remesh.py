@@ -1,0 +1,170 @@
+"""Remeshing with subdivision connectivity (jaxparam.remesh, survey §7)."""
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from jaxparam.cli import main
+from jaxparam.errors import MeshError, TopologyError
+from jaxparam.remesh import base_domain, dyadic_refine, hierarchy_from_faces, locate, refine_domain
+
+
+def area2(U, F):
+    a, b, c = U[F[:, 0]], U[F[:, 1]], U[F[:, 2]]
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
+@pytest.fixture(scope="module")
+def surface():
+    mesh = jp.shapes.graph_surface(12)
+    return mesh, np.asarray(jp.convex_map(mesh, weights="mean_value", boundary="circle"))
+
+
+@pytest.fixture(scope="module")
+def semi(surface):
+    mesh, uv = surface
+    return jp.remesh(mesh, uv, levels=3)
+
+
+def test_dyadic_refinement_splits_each_triangle_into_four_at_the_midpoints():
+    U = np.array([[0.0, 0], [1, 0], [0, 1], [1, 1]])
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    F1, parents, on_bnd = dyadic_refine(F, 4)
+    assert F1.shape == (8, 3) and parents.shape == (5, 2)          # 5 edges, 5 new vertices
+    assert on_bnd.sum() == 4                                       # the diagonal is interior
+    U1 = np.concatenate([U, U[parents].mean(1)])
+    A = area2(U1, F1)
+    assert np.all(A > 0)
+    np.testing.assert_allclose(A.reshape(2, 4), np.repeat(area2(U, F)[:, None] / 4, 4, 1))
+    t = jp.TriMesh(U1, F1).topology
+    assert t.is_disk and t.n_vertices == 9
+
+
+def test_locate_agrees_with_a_brute_force_search_and_rejects_outside_points(disk_mesh):
+    U = np.asarray(jp.convex_map(disk_mesh, weights="uniform"))
+    F = disk_mesh.faces
+    rng = np.random.default_rng(0)
+    r, t = np.sqrt(rng.random(300)) * 0.95, 2 * np.pi * rng.random(300)
+    Q = np.column_stack([r * np.cos(t), r * np.sin(t)])
+    face, bary = locate(U, F, Q)
+    np.testing.assert_allclose(np.einsum("kc,kcd->kd", bary, U[F[face]]), Q, atol=1e-12)
+    assert np.all(bary >= 0)
+    with pytest.raises(MeshError, match="outside the parameter domain"):
+        locate(U, F, np.array([[0.0, 0.0], [1.5, 0.0]]))
+
+
+def test_remesh_has_subdivision_connectivity_and_lies_on_the_surface(surface, semi):
+    mesh, uv = surface
+    H = semi.hierarchy
+    assert H.levels == 3 and semi.n_faces == 6 * 4 ** 3 and H.counts[-1] == semi.n_vertices
+    assert semi.topology.is_disk
+    assert np.all(area2(np.asarray(semi.uv), semi.faces) > 0)       # T^j is a triangulation
+    # eq. (11): every vertex is psi^{-1} of its parameter point, i.e. on the input's faces.
+    face, bary = locate(uv, mesh.faces, np.asarray(semi.uv))
+    X = np.einsum("kc,kcd->kd", bary, np.asarray(mesh.vertices)[mesh.faces[face]])
+    np.testing.assert_allclose(np.asarray(semi.vertices), X, atol=1e-12)
+    # Boundary vertices lie on the parameter domain's boundary polygon (so on the surface's
+    # boundary): distance to the polygon's segments.
+    loop = mesh.topology.boundary_loops[0]
+    A, B = uv[loop], uv[np.roll(loop, -1)]
+    Q = np.asarray(semi.uv)[semi.topology.boundary]
+    t = np.clip(np.einsum("qsd,sd->qs", Q[:, None] - A[None], B - A) / np.sum((B - A) ** 2, 1), 0, 1)
+    d = np.linalg.norm(Q[:, None] - (A[None] + t[..., None] * (B - A)[None]), axis=2).min(1)
+    assert d.max() < 1e-12
+    # Nested vertex sets: the first n_l vertices are T^l's, with its faces.
+    for level in range(H.levels + 1):
+        assert H.faces[level].max() == H.counts[level] - 1
+
+
+def test_the_hierarchy_is_recovered_from_the_faces_alone(semi, tmp_path):
+    p = tmp_path / "semi.obj"
+    jp.save(p, semi, semi.uv)
+    back = jp.load(p)
+    H = hierarchy_from_faces(back.faces, back.n_vertices)
+    assert H.counts == semi.hierarchy.counts
+    for a, b in zip(H.parents, semi.hierarchy.parents):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(MeshError, match="subdivision connectivity"):
+        hierarchy_from_faces(jp.shapes.graph_surface(5).faces, 25)
+
+
+def test_a_square_map_with_its_corners_is_covered_exactly():
+    mesh = jp.shapes.example5(9)
+    loop = list(mesh.topology.boundary_loops[0])
+    at_corner = sorted([0, 8, 72, 80], key=loop.index)          # the grid's corners, in loop order
+    assert loop[0] == at_corner[0]
+    corners = [loop.index(v) for v in at_corner]               # positions in the loop
+    uv = np.asarray(jp.convex_map(mesh, boundary="square", corners=corners))
+    lo, hi = uv.min(0), uv.max(0)
+    assert all(np.all(np.isclose(uv[v], lo) | np.isclose(uv[v], hi)) for v in at_corner)
+    semi = jp.remesh(mesh, uv, levels=2, corners=corners)
+    assert semi.n_faces == 4 * 16
+    total = 0.5 * area2(np.asarray(semi.uv), semi.faces).sum()
+    np.testing.assert_allclose(total, np.prod(hi - lo), rtol=1e-12)
+
+
+def test_remesh_is_differentiable_in_the_vertex_positions(surface):
+    mesh, uv = surface
+    faces = mesh.faces
+
+    def loss(V):
+        s = jp.remesh(jp.TriMesh(V, faces, validate=False), uv, levels=2)
+        return jnp.sum(s.vertices[:, 2] ** 2) + jnp.sum(jp.wavelets.analyze(s).details[-1] ** 2)
+
+    V0 = jnp.asarray(mesh.vertices)
+    g = jax.grad(loss)(V0)
+    D = np.random.default_rng(1).normal(size=V0.shape)
+    h = 1e-6
+    fd = (loss(V0 + h * D) - loss(V0 - h * D)) / (2 * h)
+    np.testing.assert_allclose(float(jnp.sum(g * D)), float(fd), rtol=1e-6)
+
+
+def test_bad_remesh_input_is_named(surface):
+    mesh, uv = surface
+    with pytest.raises(MeshError, match="levels must be an integer"):
+        jp.remesh(mesh, uv, levels=-1)
+    with pytest.raises(MeshError, match=r"uv must be a finite \(144, 2\)"):
+        jp.remesh(mesh, uv[:10], levels=1)
+    bad = uv.copy()
+    bad[:, 0] *= -1                                            # mirrored: every face flipped
+    with pytest.raises(MeshError, match="not one-to-one: faces 0, 1"):
+        jp.remesh(mesh, bad, levels=1)
+    with pytest.raises(MeshError, match="at least 3 corners"):
+        jp.remesh(mesh, uv, levels=1, corners=2)
+    with pytest.raises(MeshError, match=r"increasing positions in the boundary loop of 44 vertices.*\[0, 11, 50\]"):
+        jp.remesh(mesh, uv, levels=1, corners=[0, 11, 50])
+    with pytest.raises(TopologyError, match="closed"):
+        sphere = jp.shapes.sphere(1)
+        jp.remesh(sphere, np.zeros((sphere.n_vertices, 2)), levels=1)
+
+
+def test_refined_boundary_vertices_go_halfway_along_the_boundary():
+    # The unit circle's 64-gon, a 4-corner base: level-1 boundary vertices sit at the arc
+    # midpoints, i.e. at 45, 135, 225 and 315 degrees, not at the chords' midpoints.
+    t = 2 * np.pi * np.arange(64) / 64
+    U = np.column_stack([np.cos(t), np.sin(t)])
+    uv0, F0, s0, curve = base_domain(U, np.arange(64), 4)
+    uv1, H = refine_domain(uv0, F0, s0, curve, 1)
+    new_on_circle = np.abs(np.linalg.norm(uv1[H.counts[0]:], axis=1) - 1) < 1e-12
+    ang = np.sort(np.degrees(np.arctan2(uv1[H.counts[0]:][new_on_circle, 1],
+                                        uv1[H.counts[0]:][new_on_circle, 0])) % 360)
+    np.testing.assert_allclose(ang, [45, 135, 225, 315], atol=1e-9)
+
+
+def test_cli_remesh_then_compress(tmp_path):
+    src, semi, small = tmp_path / "g.obj", tmp_path / "semi.obj", tmp_path / "small.obj"
+    rep, rep2, png = tmp_path / "r.json", tmp_path / "c.json", tmp_path / "p.png"
+    jp.save(src, jp.shapes.graph_surface(10))
+    assert main(["remesh", str(src), "-o", str(semi), "--levels", "3", "--base-faces", "5",
+                 "--report", str(rep), "--plot", str(png)]) == 0
+    r = json.loads(rep.read_text())
+    assert r["faces"] == 5 * 64 and r["flips"] == 0 and r["levels"] == 3 and png.stat().st_size > 1000
+    assert main(["compress", str(semi), "-o", str(small), "--keep", "0.1", "--report", str(rep2)]) == 0
+    c = json.loads(rep2.read_text())
+    a, b = jp.load(semi), jp.load(small)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    assert c["coefficients_kept"] == round(0.1 * (a.n_vertices - 6)) and 0 < c["max_error"] < 0.1
+    assert main(["compress", str(src), "-o", str(small), "--keep", "0.1"]) == 3   # not semi-regular
