@@ -26,3 +26,10 @@ def test_notebook_01_runs(tmp_path):
     ns = run_notebook(NB / "01_convex_combination_maps.ipynb", tmp_path)
     assert (tmp_path / "out" / "nb01_uv.png").stat().st_size > 1000
     assert float(ns["g"].__abs__().max()) > 0
+
+
+def test_notebook_04_runs(tmp_path):
+    (tmp_path / "out").mkdir()
+    ns = run_notebook(NB / "04_remeshing_and_wavelets.ipynb", tmp_path)
+    assert (tmp_path / "out" / "nb04_remesh.png").stat().st_size > 1000
+    assert ns["err"] < 1e-12 and float(ns["g"].__abs__().max()) > 0
