@@ -168,3 +168,17 @@ def test_cli_remesh_then_compress(tmp_path):
     np.testing.assert_array_equal(a.faces, b.faces)
     assert c["coefficients_kept"] == round(0.1 * (a.n_vertices - 6)) and 0 < c["max_error"] < 0.1
     assert main(["compress", str(src), "-o", str(small), "--keep", "0.1"]) == 3   # not semi-regular
+
+
+def test_holes_and_non_convex_domains_are_refused_with_a_remedy():
+    grid = jp.shapes.plane_grid(9, 9)
+    F = grid.faces[~np.any(grid.faces == 40, axis=1)]            # a hole around the centre
+    keep = np.unique(F)
+    holed = jp.TriMesh(np.asarray(grid.vertices)[keep], np.searchsorted(keep, F))
+    with pytest.raises(MeshError, match="2 boundary loops; remeshing needs a disk"):
+        jp.remesh(holed, np.asarray(holed.vertices)[:, :2], levels=1)
+    # A domain with a deep notch in its top side: the base fan reaches outside it.
+    x, y = np.asarray(grid.vertices)[:, 0], np.asarray(grid.vertices)[:, 1]
+    uv = np.column_stack([x, y * (1 - 0.8 * np.exp(-((x - 0.5) / 0.12) ** 2))])
+    with pytest.raises(MeshError, match="convex boundary map"):
+        jp.remesh(grid, uv, levels=2, corners=8)
