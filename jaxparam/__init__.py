@@ -31,6 +31,8 @@ from .points import load_points, meshless_map, reconstruct_surface  # noqa: E402
 from .fitting import fit_surface  # noqa: E402
 from . import wavelets  # noqa: E402
 from .remesh import remesh  # noqa: E402  (the function; the module is jaxparam.remesh in sys.modules)
+from . import manifold  # noqa: E402
+from .manifold import manifold_map  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -41,5 +43,5 @@ __all__ = [
     "errors", "tol", "topology", "geometry", "boundary", "weights", "sparse", "linear",
     "metrics", "shapes", "energies", "optimize", "energy", "Energy", "ENERGIES", "minimize",
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
-    "fitting", "fit_surface", "plot", "remesh", "wavelets",
+    "fitting", "fit_surface", "plot", "remesh", "wavelets", "manifold", "manifold_map",
 ]

@@ -290,6 +290,37 @@ def cmd_compress(args) -> int:
     return EXIT_OK
 
 
+def cmd_manifold(args) -> int:
+    from .manifold import manifold_map
+    from .mesh import load, save
+
+    seconds = {}
+    t = time.perf_counter()
+    mesh = load(args.mesh)
+    seconds["load"] = time.perf_counter() - t
+    t = time.perf_counter()
+    base, param = manifold_map(mesh, args.base_faces)
+    seconds["parameterize"] = time.perf_counter() - t
+    t = time.perf_counter()
+    semi = param.remesh(args.levels)
+    seconds["remesh"] = time.perf_counter() - t
+    save(args.output, semi)
+    t = semi.topology
+    rep = {"vertices": semi.n_vertices, "faces": semi.n_faces, "genus": int(t.genus),
+           "base_vertices": base.n_vertices, "base_faces": base.n_faces, "levels": args.levels,
+           "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
+           "work_vertices": param.mesh.n_vertices, "seconds": seconds}
+    if args.report:
+        write_json(args.report, rep)
+    if args.plot:
+        from .plot import plot_remesh
+
+        plot_remesh(semi, args.plot)
+    print(f"{args.output}: {semi.n_vertices} vertices, {semi.n_faces} faces, genus {t.genus}, "
+          f"subdivision connectivity of order {args.levels} over {base.n_faces} base faces")
+    return EXIT_OK
+
+
 def _add_remesh_commands(sub) -> None:
     p = sub.add_parser("remesh", help="remesh a disk mesh with subdivision connectivity")
     p.add_argument("mesh")
@@ -308,6 +339,15 @@ def _add_remesh_commands(sub) -> None:
     p.add_argument("--wavelet", choices=["lazy", "lifted"], default="lifted")
     p.add_argument("--report")
     p.set_defaults(func=cmd_compress)
+    p = sub.add_parser("manifold", help="parameterize a closed mesh of any genus over a base domain "
+                                        "and remesh it with subdivision connectivity")
+    p.add_argument("mesh")
+    p.add_argument("-o", "--output", required=True)
+    p.add_argument("--base-faces", type=int, default=100)
+    p.add_argument("--levels", type=int, default=3)
+    p.add_argument("--report")
+    p.add_argument("--plot")
+    p.set_defaults(func=cmd_manifold)
 
 
 def _add_flatten_options(p) -> None:

@@ -146,8 +146,8 @@ def disk_check(mesh: TriMesh, where: str) -> None:
     if t.is_closed:
         raise TopologyError(
             f"{where}: the mesh is closed (no boundary, genus {t.genus}); a disk method needs a "
-            "boundary: cut the mesh open along a path (closed meshes of any genus, jp.manifold_map in "
-            "the design, are not implemented yet).")
+            "boundary: cut the mesh open along a path, or parameterize it over a base domain with "
+            "jp.manifold_map (closed meshes of any genus).")
     if t.genus != 0:
         raise TopologyError(
             f"{where}: the mesh has genus {t.genus} with {len(t.boundary_loops)} boundary loops; a "

@@ -135,12 +135,13 @@ def plot_isocurves(surface: Surface, path, *, lines: int = 12, samples: int = 20
 def plot_remesh(semi, path, *, title: str | None = None, elev: float = 30, azim: float = -60):
     """Two panels: the remesh on the surface, its faces shaded and coloured by the base
     triangle they come from, with edges drawn; and its parameter domain ``semi.uv``
-    (the refined base domain ``T^j``).  ``semi`` is a :func:`jaxparam.remesh` result."""
+    (the refined base domain ``T^j``; left out for closed remeshes, which have none).
+    ``semi`` is a :func:`jaxparam.remesh` or ``ManifoldParameterization.remesh`` result."""
     from matplotlib.collections import PolyCollection
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     V = np.asarray(semi.vertices, np.float64)
-    U = np.asarray(semi.uv, np.float64)
+    U = None if semi.uv is None else np.asarray(semi.uv, np.float64)
     F = semi.faces
     base_of = np.arange(F.shape[0]) // (4 ** semi.hierarchy.levels)   # children follow their parent
     P = V[F]
@@ -150,14 +151,16 @@ def plot_remesh(semi, path, *, title: str | None = None, elev: float = 30, azim:
     palette = np.array([[0.95, 0.6, 0.1], [0.15, 0.3, 0.7], [0.3, 0.65, 0.3], [0.8, 0.25, 0.3],
                         [0.55, 0.4, 0.75], [0.2, 0.6, 0.7]])
     colors = np.clip(palette[base_of % len(palette)] * light[:, None], 0, 1)
-    plt, fig = _figure((12, 6))
-    ax = fig.add_subplot(121, projection="3d")
+    plt, fig = _figure((12, 6) if U is not None else (7, 6))
+    ax = fig.add_subplot(121 if U is not None else 111, projection="3d")
     ax.add_collection3d(Poly3DCollection(P, facecolors=colors, edgecolors="k", linewidths=0.1))
     _equal_axes_3d(ax, V)
     ax.view_init(elev=elev, azim=azim)
     ax.set_axis_off()
     ax.set_title(title or f"remesh: {F.shape[0]} faces, subdivision connectivity of order "
                  f"{semi.hierarchy.levels}")
+    if U is None:                       # a closed remesh (jaxparam.manifold): no plane picture
+        return _save(plt, fig, path)
     ax2 = fig.add_subplot(122)
     ax2.add_collection(PolyCollection(U[F], facecolors=palette[base_of % len(palette)],
                                       edgecolors="k", linewidths=0.1))

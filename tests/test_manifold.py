@@ -1,0 +1,97 @@
+"""Closed meshes of any genus (jaxparam.manifold, survey §9)."""
+import json
+
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from conftest import data_path
+from jaxparam.cli import main
+from jaxparam.errors import MeshError, TopologyError
+from jaxparam.manifold import REFERENCE, decimate, manifold_map
+
+
+def signed_volume(V, F):
+    V = np.asarray(V)
+    return float(np.sum(np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]]))))
+
+
+@pytest.fixture(scope="module")
+def torus():
+    mesh = jp.shapes.torus(40, 20)
+    base, param = manifold_map(mesh, 40)
+    return mesh, base, param
+
+
+def test_decimation_keeps_genus_orientation_and_original_vertices():
+    mesh = jp.shapes.sphere(3)
+    kept, F = decimate(mesh, 20)
+    base = jp.TriMesh(np.asarray(mesh.vertices)[kept], F)
+    assert base.n_faces == 20 and base.topology.is_closed and base.topology.genus == 0
+    assert signed_volume(base.vertices, base.faces) > 0          # outward, as the sphere
+    torus = jp.shapes.torus(24, 12)
+    kept, F = decimate(torus, 30)
+    assert jp.TriMesh(np.asarray(torus.vertices)[kept], F).topology.genus == 1
+
+
+def test_the_parameterization_covers_the_surface_once(torus):
+    mesh, base, param = torus
+    assert base.n_faces == 40 and base.topology.genus == 1
+    np.testing.assert_array_equal(np.asarray(base.vertices), np.asarray(mesh.vertices)[param.base_vertices])
+    # Every surface triangle is used; every face is a positive triangle of its chart.
+    assert set(np.unique(param.region)) == set(range(40))
+    u = param.face_uv
+    area = (u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1]) - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0])
+    assert np.all(area > 0)
+    # The charts tile the reference triangles exactly (areas add up per base face).
+    per_base = np.bincount(param.region, weights=area / 2, minlength=40)
+    np.testing.assert_allclose(per_base, np.sqrt(3) / 4, rtol=1e-9)
+    # phi(phi^-1(v)) = v for every vertex of the parameterized mesh.
+    X = param.lift(param.vertex_face, param.vertex_bary @ REFERENCE)
+    np.testing.assert_allclose(np.asarray(X), np.asarray(param.mesh.vertices), atol=1e-12)
+
+
+def test_the_remesh_is_closed_with_the_genus_and_subdivision_connectivity(torus):
+    mesh, base, param = torus
+    semi = param.remesh(2)
+    t = semi.topology
+    assert semi.n_faces == 40 * 16 and t.is_closed and t.genus == 1 and t.n_components == 1
+    np.testing.assert_allclose(np.asarray(semi.vertices)[:base.n_vertices], np.asarray(base.vertices), atol=1e-12)
+    # On the torus of radii 1 and 0.35, up to the sagittas of its 40 x 20 polygons
+    # (0.35 (1 - cos(pi / 20)) = 0.0043 across the tube, 1.35 (1 - cos(pi / 40)) = 0.0042 round).
+    X = np.asarray(semi.vertices)
+    r = np.hypot(np.hypot(X[:, 0], X[:, 1]) - 1.0, X[:, 2])
+    assert np.all(np.abs(r - 0.35) < 0.0043 + 0.0042 + 1e-9)
+    c = jp.wavelets.analyze(semi)
+    np.testing.assert_allclose(np.asarray(jp.wavelets.synthesize(c)), X, atol=1e-13)
+    assert signed_volume(X, semi.faces) > 0
+
+
+def test_bad_manifold_input_is_named(torus):
+    with pytest.raises(TopologyError, match="needs a closed surface"):
+        manifold_map(jp.shapes.graph_surface(6), 10)
+    mesh = torus[0]
+    with pytest.raises(MeshError, match=r"even integer in \[24, 1600\).*genus-1.*got 21"):
+        manifold_map(mesh, 21)
+    with pytest.raises(MeshError, match=r"got 12"):
+        manifold_map(mesh, 12)
+    with pytest.raises(MeshError, match="unknown weights"):
+        manifold_map(mesh, 40, weights="cotan")
+    with pytest.raises(MeshError, match=r"levels must be an integer in \[0, 8\]"):
+        torus[2].remesh(9)
+
+
+@pytest.mark.data
+@pytest.mark.peer
+def test_cow_remesh_lies_on_the_surface_and_cli_writes_it(tmp_path):
+    igl = pytest.importorskip("igl")
+    src = data_path("meshes", "cow.off")
+    out, rep = tmp_path / "cow_semi.obj", tmp_path / "r.json"
+    assert main(["manifold", str(src), "-o", str(out), "--base-faces", "100", "--levels", "3",
+                 "--report", str(rep)]) == 0
+    r = json.loads(rep.read_text())
+    assert r["faces"] == 100 * 64 and r["genus"] == 0 and r["base_faces"] == 100
+    mesh, semi = jp.load(src), jp.load(out)
+    d2 = igl.point_mesh_squared_distance(np.asarray(semi.vertices), np.asarray(mesh.vertices), mesh.faces)[0]
+    assert np.sqrt(d2.max()) < 1e-12 * np.linalg.norm(np.ptp(np.asarray(mesh.vertices), axis=0))
+    assert main(["compress", str(out), "-o", str(tmp_path / "small.obj"), "--keep", "0.05"]) == 0
