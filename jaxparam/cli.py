@@ -75,6 +75,28 @@ def report_dict(mesh, uv, *, weights=None, seconds=None, extra=None) -> dict:
     return out
 
 
+class _Seconds(dict):
+    """Wall-clock seconds per stage: ``clock("name")`` closes the stage that ran since the
+    previous call (or since the clock was made)."""
+
+    def __init__(self):
+        super().__init__()
+        self._t = time.perf_counter()
+
+    def __call__(self, name: str) -> None:
+        now = time.perf_counter()
+        self[name] = now - self._t
+        self._t = now
+
+
+def _report_and_plot(args, rep: dict, plot) -> None:
+    """Write ``--report`` and draw ``--plot`` when asked; ``plot(path)`` draws the picture."""
+    if args.report:
+        write_json(args.report, rep)
+    if getattr(args, "plot", None):
+        plot(args.plot)
+
+
 # -- subcommands -----------------------------------------------------------------------------
 
 def cmd_info(args) -> int:
@@ -169,24 +191,19 @@ def cmd_meshless(args) -> int:
     from .points import load_points, reconstruct_surface
 
     _enable_compile_cache()
-    seconds = {}
-    t = time.perf_counter()
+    seconds = _Seconds()
     P = load_points(args.points)
-    seconds["load"] = time.perf_counter() - t
-    t = time.perf_counter()
+    seconds("load")
     rec = reconstruct_surface(P, k=args.k, weights=_py(args.weights), boundary=args.boundary)
-    seconds["meshless_map_and_reconstruction"] = time.perf_counter() - t
+    seconds("meshless_map_and_reconstruction")
     save(args.output, rec, np.nan_to_num(np.asarray(rec.uv)))
     used = int(rec.topology.referenced.sum())
     rep = report_dict(rec, rec.uv, seconds=seconds, extra={
         "points": int(P.shape[0]), "points_used": used, "boundary_points": int(rec.boundary_points.size),
         "k": args.k, "weights": args.weights})
-    if args.report:
-        write_json(args.report, rep)
-    if args.plot:
-        from .plot import plot_uv
+    from .plot import plot_uv
 
-        plot_uv(rec, np.nan_to_num(np.asarray(rec.uv)), args.plot)
+    _report_and_plot(args, rep, lambda path: plot_uv(rec, np.nan_to_num(np.asarray(rec.uv)), path))
     print(f"{args.output}: {P.shape[0]} points, {used} used, {rec.n_faces} faces, {rep['flips']} flipped")
     return EXIT_OK
 
@@ -239,26 +256,20 @@ def cmd_remesh(args) -> int:
     from .remesh import remesh
 
     _enable_compile_cache()
-    seconds = {}
-    t = time.perf_counter()
+    seconds = _Seconds()
     mesh = load(args.mesh)
-    seconds["load"] = time.perf_counter() - t
-    t = time.perf_counter()
+    seconds("load")
     uv = convex_map(mesh, weights=_py(args.weights), boundary=args.boundary)
-    seconds["parameterize"] = time.perf_counter() - t
-    t = time.perf_counter()
+    seconds("parameterize")
     semi = remesh(mesh, uv, levels=args.levels, corners=args.base_faces)
-    seconds["remesh"] = time.perf_counter() - t
+    seconds("remesh")
     save(args.output, semi, semi.uv)
     rep = report_dict(semi, semi.uv, seconds=seconds, extra={
         "levels": args.levels, "base_faces": int(semi.base_faces.shape[0]),
         "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces})
-    if args.report:
-        write_json(args.report, rep)
-    if args.plot:
-        from .plot import plot_remesh
+    from .plot import plot_remesh
 
-        plot_remesh(semi, args.plot)
+    _report_and_plot(args, rep, lambda path: plot_remesh(semi, path))
     print(f"{args.output}: {semi.n_vertices} vertices, {semi.n_faces} faces, subdivision connectivity "
           f"of order {args.levels} over {semi.base_faces.shape[0]} base faces")
     return EXIT_OK
@@ -282,8 +293,7 @@ def cmd_compress(args) -> int:
            "coefficients_kept": small.kept, "stored_fraction": small.stored_fraction,
            "max_error": float(err.max() / diag), "rms_error": float(np.sqrt(np.mean(err ** 2)) / diag),
            "wavelet": args.wavelet, "seconds": seconds}
-    if args.report:
-        write_json(args.report, rep)
+    _report_and_plot(args, rep, None)
     print(f"{args.output}: kept {small.kept} coefficients, {100 * small.stored_fraction:.2f} % of the "
           f"vertices' data; error max {100 * rep['max_error']:.3f} %, RMS {100 * rep['rms_error']:.3f} % "
           "of the bounding-box diagonal")
@@ -294,28 +304,22 @@ def cmd_manifold(args) -> int:
     from .manifold import manifold_map
     from .mesh import load, save
 
-    seconds = {}
-    t = time.perf_counter()
+    seconds = _Seconds()
     mesh = load(args.mesh)
-    seconds["load"] = time.perf_counter() - t
-    t = time.perf_counter()
+    seconds("load")
     base, param = manifold_map(mesh, args.base_faces)
-    seconds["parameterize"] = time.perf_counter() - t
-    t = time.perf_counter()
+    seconds("parameterize")
     semi = param.remesh(args.levels)
-    seconds["remesh"] = time.perf_counter() - t
+    seconds("remesh")
     save(args.output, semi)
     t = semi.topology
     rep = {"vertices": semi.n_vertices, "faces": semi.n_faces, "genus": int(t.genus),
            "base_vertices": base.n_vertices, "base_faces": base.n_faces, "levels": args.levels,
            "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
            "work_vertices": param.mesh.n_vertices, "seconds": seconds}
-    if args.report:
-        write_json(args.report, rep)
-    if args.plot:
-        from .plot import plot_remesh
+    from .plot import plot_remesh
 
-        plot_remesh(semi, args.plot)
+    _report_and_plot(args, rep, lambda path: plot_remesh(semi, path))
     print(f"{args.output}: {semi.n_vertices} vertices, {semi.n_faces} faces, genus {t.genus}, "
           f"subdivision connectivity of order {args.levels} over {base.n_faces} base faces")
     return EXIT_OK
