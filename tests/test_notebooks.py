@@ -33,3 +33,9 @@ def test_notebook_04_runs(tmp_path):
     ns = run_notebook(NB / "04_remeshing_and_wavelets.ipynb", tmp_path)
     assert (tmp_path / "out" / "nb04_remesh.png").stat().st_size > 1000
     assert ns["err"] < 1e-12 and float(ns["g"].__abs__().max()) > 0
+
+
+def test_notebook_05_runs(tmp_path):
+    ns = run_notebook(NB / "05_closed_meshes.ipynb", tmp_path)
+    assert (tmp_path / "out" / "nb05_torus_remesh.png").stat().st_size > 1000
+    assert ns["err"] < 1e-12 and ns["semi"].topology.genus == 1
