@@ -7,7 +7,9 @@ reconstruction of 1M points allocates and frees a few GB of such blocks (XLA's b
 PARDISO's work space, numpy temporaries): 1.5M page faults a call, several seconds of system
 time on the 2-core development box.  Inside :func:`reuse_freed_memory` large blocks come from
 the heap instead and freed ones stay there for the next allocation; on the way out the free
-memory is given back (``malloc_trim``) and glibc's limits are put back.  Measured on
+memory is given back (``malloc_trim``) and the two limits are set back to glibc's defaults
+(setting them, in or out, also ends glibc's own raising of its mmap threshold for the rest of
+the process: later blocks above the threshold in force then are mmapped, as by default).  Measured on
 ``benchmarks/points.py`` at 1M points: first call 25.0-25.4 s instead of 28.9-30.1 s, peak
 memory unchanged (5.2-5.5 GB).  Mesh maps (1.45M faces) gained nothing measurable, so only
 :func:`jaxparam.reconstruct_surface` uses it.
