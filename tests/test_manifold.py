@@ -95,3 +95,14 @@ def test_cow_remesh_lies_on_the_surface_and_cli_writes_it(tmp_path):
     d2 = igl.point_mesh_squared_distance(np.asarray(semi.vertices), np.asarray(mesh.vertices), mesh.faces)[0]
     assert np.sqrt(d2.max()) < 1e-12 * np.linalg.norm(np.ptp(np.asarray(mesh.vertices), axis=0))
     assert main(["compress", str(out), "-o", str(tmp_path / "small.obj"), "--keep", "0.05"]) == 0
+
+
+def test_cli_manifold_on_a_generated_torus(tmp_path):
+    src, out, rep = tmp_path / "torus.obj", tmp_path / "semi.obj", tmp_path / "r.json"
+    jp.save(src, jp.shapes.torus(40, 20))
+    assert main(["manifold", str(src), "-o", str(out), "--base-faces", "40", "--levels", "2",
+                 "--report", str(rep)]) == 0
+    r = json.loads(rep.read_text())
+    assert r["faces"] == 40 * 16 and r["genus"] == 1 and set(r["seconds"]) == {"load", "parameterize", "remesh"}
+    assert jp.load(out).topology.genus == 1
+    assert main(["manifold", str(src), "-o", str(out), "--base-faces", "21"]) == 3     # odd count
