@@ -39,7 +39,7 @@ from . import topology as topo
 from . import weights as wts
 from .errors import MeshError, SolverError, TopologyError, first_few
 from .mesh import TriMesh
-from .remesh import Hierarchy, dyadic_refine, locate
+from .remesh import CHILDREN, Hierarchy, _barycentric, _signed_area2, dyadic_refine, locate
 
 #: The reference triangle every base triangle's chart uses.
 REFERENCE = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3.0) / 2.0]])
@@ -546,10 +546,8 @@ class ManifoldParameterization:
         counts, parents, faces = [n], [], [F]
         for _ in range(levels):
             F, par, _ = dyadic_refine(F, counts[-1])
-            b1, b2, b3 = bary[:, 0], bary[:, 1], bary[:, 2]
-            w1, w2, w3 = (b2 + b3) / 2, (b3 + b1) / 2, (b1 + b2) / 2
-            bary = np.stack([np.stack([b1, w3, w2], 1), np.stack([w3, b2, w1], 1),
-                             np.stack([w2, w1, b3], 1), np.stack([w1, w2, w3], 1)], 1).reshape(-1, 3, 3)
+            mid = (bary[:, [1, 2, 0]] + bary[:, [2, 0, 1]]) / 2      # w1, w2, w3
+            bary = np.concatenate([bary, mid], axis=1)[:, CHILDREN].reshape(-1, 3, 3)
             counts.append(counts[-1] + par.shape[0])
             parents.append(par)
             faces.append(F)
@@ -703,10 +701,8 @@ def _charts(W, base_ids, F0, base_topo, paths, region, weights):
     face_uv = uv[v3].copy()
     fx = fixed[v3]
     face_uv[fx] = chart(r3[fx], v3[fx])
+    bad = np.flatnonzero(_signed_area2(face_uv, np.arange(face_uv.shape[0]).reshape(-1, 3)) <= 0)
     face_uv = face_uv.reshape(-1, 3, 2)
-    area = ((face_uv[:, 1, 0] - face_uv[:, 0, 0]) * (face_uv[:, 2, 1] - face_uv[:, 0, 1])
-            - (face_uv[:, 1, 1] - face_uv[:, 0, 1]) * (face_uv[:, 2, 0] - face_uv[:, 0, 0]))
-    bad = np.flatnonzero(area <= 0)
     if bad.size:
         raise SolverError(f"manifold_map: faces {first_few(bad)} are flipped or degenerate in their "
                           "surface triangle's chart; try another base_faces count.", stage="charts")
@@ -715,8 +711,4 @@ def _charts(W, base_ids, F0, base_topo, paths, region, weights):
     cidx[v3] = np.arange(v3.size)
     vface = region[cidx // 3]
     q = face_uv.reshape(-1, 2)[cidx]
-    T = REFERENCE
-    det = (T[1, 0] - T[0, 0]) * (T[2, 1] - T[0, 1]) - (T[1, 1] - T[0, 1]) * (T[2, 0] - T[0, 0])
-    l1 = ((T[1, 0] - q[:, 0]) * (T[2, 1] - q[:, 1]) - (T[1, 1] - q[:, 1]) * (T[2, 0] - q[:, 0])) / det
-    l2 = ((T[2, 0] - q[:, 0]) * (T[0, 1] - q[:, 1]) - (T[2, 1] - q[:, 1]) * (T[0, 0] - q[:, 0])) / det
-    return face_uv, vface, np.stack([l1, l2, 1 - l1 - l2], 1)
+    return face_uv, vface, _barycentric(np.broadcast_to(REFERENCE, (n, 3, 2)), q)

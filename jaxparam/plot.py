@@ -32,6 +32,13 @@ def _equal_axes_3d(ax, P) -> None:
         ax.set_zlim(mid[2] - r, mid[2] + r)
 
 
+def _shade(P: np.ndarray) -> np.ndarray:
+    """``(m,)`` brightness in [0.55, 1] of triangles ``P (m, 3, 3)`` under one fixed light."""
+    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return 0.55 + 0.45 * np.abs(n @ np.array([0.3, -0.4, 0.85]) / np.linalg.norm([0.3, -0.4, 0.85]))
+
+
 def _save(plt, fig, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -97,9 +104,7 @@ def plot_checkerboard(mesh, uv, path, *, squares: int = 8, title: str | None = N
     c = (U[F].mean(1) - lo) / np.max(hi - lo) * squares
     check = (np.floor(c[:, 0]) + np.floor(c[:, 1])) % 2
     P = V[F]
-    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    light = 0.55 + 0.45 * np.abs(n @ np.array([0.3, -0.4, 0.85]) / np.linalg.norm([0.3, -0.4, 0.85]))
+    light = _shade(P)
     base = np.where(check[:, None] > 0, np.array([[0.95, 0.6, 0.1]]), np.array([[0.15, 0.3, 0.7]]))
     colors = np.clip(base * light[:, None], 0, 1)
     plt, fig = _figure()
@@ -145,9 +150,7 @@ def plot_remesh(semi, path, *, title: str | None = None, elev: float = 30, azim:
     F = semi.faces
     base_of = np.arange(F.shape[0]) // (4 ** semi.hierarchy.levels)   # children follow their parent
     P = V[F]
-    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    light = 0.55 + 0.45 * np.abs(n @ np.array([0.3, -0.4, 0.85]) / np.linalg.norm([0.3, -0.4, 0.85]))
+    light = _shade(P)
     palette = np.array([[0.95, 0.6, 0.1], [0.15, 0.3, 0.7], [0.3, 0.65, 0.3], [0.8, 0.25, 0.3],
                         [0.55, 0.4, 0.75], [0.2, 0.6, 0.7]])
     colors = np.clip(palette[base_of % len(palette)] * light[:, None], 0, 1)

@@ -31,6 +31,12 @@ import numpy as np
 from .errors import MeshError, first_few
 from .linear import disk_check
 from .mesh import TriMesh
+from .points import _orient
+
+#: The four children of a triangle ``(v1, v2, v3)`` in the dyadic refinement, as indices into
+#: ``(v1, v2, v3, w1, w2, w3)`` (``w_i`` the midpoint of the edge opposite ``v_i``),
+#: anticlockwise, corner children first; face ``f`` becomes faces ``4f .. 4f+3`` in this order.
+CHILDREN = np.array([[0, 5, 4], [5, 1, 3], [4, 3, 2], [3, 4, 5]])
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,10 +77,7 @@ def dyadic_refine(faces: np.ndarray, n_vertices: int):
     uniq, first, inverse, count = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
     w = n_vertices + inverse.reshape(m, 3)
     parents = np.stack([src.ravel()[first], dst.ravel()[first]], axis=1)
-    v1, v2, v3 = F.T
-    w1, w2, w3 = w.T
-    children = np.stack([np.stack([v1, w3, w2], 1), np.stack([w3, v2, w1], 1),
-                         np.stack([w2, w1, v3], 1), np.stack([w1, w2, w3], 1)], axis=1)
+    children = np.concatenate([F, w], axis=1)[:, CHILDREN]        # (m, 4, 3)
     return children.reshape(4 * m, 3), parents, count == 1
 
 
@@ -208,8 +211,8 @@ def base_domain(uv: np.ndarray, loop: np.ndarray, corners: int | np.ndarray = 6)
 
 
 def _signed_area2(uv, F):
-    a, b, c = uv[F[:, 0]], uv[F[:, 1]], uv[F[:, 2]]
-    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    """Twice the signed areas of the planar faces ``F`` over ``uv``."""
+    return _orient(uv, F[:, 0], F[:, 1], F[:, 2])
 
 
 def refine_domain(uv0, faces0, s0, curve: _BoundaryCurve, levels: int):
