@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from jaxparam.topology import half_edge_twins
+
 DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
 
 
@@ -41,7 +43,7 @@ def interior_quads(F: np.ndarray) -> np.ndarray:
     ``(b, a, d)``."""
     from jaxparam import points as PT
 
-    twin = PT._twins(F, int(F.max()) + 1)
+    twin = half_edge_twins(F, int(F.max()) + 1)
     h = np.flatnonzero(twin > np.arange(twin.size))
     nxt = lambda x: x - x % 3 + (x + 1) % 3          # noqa: E731
     prv = lambda x: x - x % 3 + (x + 2) % 3          # noqa: E731

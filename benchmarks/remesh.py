@@ -31,7 +31,8 @@ def main() -> int:
     ap.add_argument("--levels", type=int, nargs="*", default=[5, 6, 7])
     args = ap.parse_args()
     import jaxparam as jp
-    from jaxparam.remesh import base_domain, locate, refine_domain
+    from jaxparam.remesh import base_domain, refine_domain
+    from jaxparam.triangles import locate
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     print(f"{'input faces':>12s} {'levels':>6s} {'remesh faces':>12s} {'refine s':>9s} {'locate s':>9s} "

@@ -39,7 +39,8 @@ from . import topology as topo
 from . import weights as wts
 from .errors import MeshError, SolverError, TopologyError, first_few
 from .mesh import TriMesh
-from .remesh import CHILDREN, Hierarchy, _barycentric, _signed_area2, dyadic_refine, locate
+from .remesh import CHILDREN, Hierarchy, dyadic_refine
+from .triangles import barycentric, locate, signed_area2
 
 #: The reference triangle every base triangle's chart uses.
 REFERENCE = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3.0) / 2.0]])
@@ -701,7 +702,7 @@ def _charts(W, base_ids, F0, base_topo, paths, region, weights):
     face_uv = uv[v3].copy()
     fx = fixed[v3]
     face_uv[fx] = chart(r3[fx], v3[fx])
-    bad = np.flatnonzero(_signed_area2(face_uv, np.arange(face_uv.shape[0]).reshape(-1, 3)) <= 0)
+    bad = np.flatnonzero(signed_area2(face_uv, np.arange(face_uv.shape[0]).reshape(-1, 3)) <= 0)
     face_uv = face_uv.reshape(-1, 3, 2)
     if bad.size:
         raise SolverError(f"manifold_map: faces {first_few(bad)} are flipped or degenerate in their "
@@ -711,4 +712,4 @@ def _charts(W, base_ids, F0, base_topo, paths, region, weights):
     cidx[v3] = np.arange(v3.size)
     vface = region[cidx // 3]
     q = face_uv.reshape(-1, 2)[cidx]
-    return face_uv, vface, _barycentric(np.broadcast_to(REFERENCE, (n, 3, 2)), q)
+    return face_uv, vface, barycentric(np.broadcast_to(REFERENCE, (n, 3, 2)), q)

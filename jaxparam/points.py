@@ -53,7 +53,8 @@ from .errors import MeshFileError, PointCloudError, first_few
 from .geometry import safe_norm
 from .memory import reuse_freed_memory
 from .mesh import TriMesh
-from .topology import permute_rows, renumber
+from .topology import half_edge_twins, permute_rows, renumber
+from .triangles import corner_angle, face_angles, orient
 
 __all__ = ["load_points", "check_points", "knn_graph", "PointGraph", "point_graph",
            "detect_boundary", "meshless_map", "reconstruct_surface", "WEIGHTS"]
@@ -793,53 +794,9 @@ def _delaunay(U: np.ndarray) -> np.ndarray:
         F = np.asarray(triangle.triangulate({"vertices": np.array(U, np.float64)}, "Qz")["triangles"], np.int64)
     else:
         F = Delaunay(U).simplices.astype(np.int64)
-    cross = _orient(U, F[:, 0], F[:, 1], F[:, 2])
+    cross = orient(U, F[:, 0], F[:, 1], F[:, 2])
     F[cross < 0] = F[cross < 0][:, [0, 2, 1]]
     return F[cross != 0]
-
-
-def _orient(U, a, b, c):
-    """Twice the signed area of the planar triangles ``(a, b, c)``."""
-    u, v = U[b] - U[a], U[c] - U[a]
-    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-
-
-def _cross_norm(x, y):
-    """``|x_i x y_i|`` for rows of ``(m, 3)`` arrays (explicit components: np.cross and
-    np.linalg.norm are 2x slower here)."""
-    cx = x[:, 1] * y[:, 2] - x[:, 2] * y[:, 1]
-    cy = x[:, 2] * y[:, 0] - x[:, 0] * y[:, 2]
-    cz = x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]
-    return np.sqrt(cx * cx + cy * cy + cz * cz)
-
-
-def _corner_angle(P, at, u, v):
-    """3D angle at ``at`` between the directions to ``u`` and ``v`` (radians)."""
-    x, y = P[u] - P[at], P[v] - P[at]
-    return np.arctan2(_cross_norm(x, y), np.einsum("ij,ij->i", x, y))
-
-
-def _face_angles(P, F):
-    """``(m, 3)`` 3D angles (radians) at the corners of the faces ``F (m, 3)``."""
-    X0, X1, X2 = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
-    a, b, c = X1 - X0, X2 - X1, X0 - X2
-    # |e x f| at every corner is twice the area: one cross product serves all three angles.
-    area2 = _cross_norm(a, c)
-    dots = -np.stack([np.einsum("ij,ij->i", a, c), np.einsum("ij,ij->i", b, a),
-                      np.einsum("ij,ij->i", c, b)], axis=1)
-    return np.arctan2(area2[:, None], dots)
-
-
-def _twins(F: np.ndarray, n: int) -> np.ndarray:
-    """``(3m,)``: the half-edge running the other way along each half-edge ``h = 3 f + j``
-    (from ``F[f, j]`` to ``F[f, j+1]``) of a manifold triangulation, ``-1`` on the boundary."""
-    src, dst = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
-    key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
-    order = np.argsort(key, kind="stable")
-    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
-    twin = np.full(key.size, -1, np.int64)
-    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
-    return twin
 
 
 def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int) -> np.ndarray:
@@ -857,9 +814,9 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
     F = np.array(F, np.int64)
     m = len(F)
     Ff = F.reshape(-1)                      # a view: writes to F show here
-    twin = _twins(F, len(P))
+    twin = half_edge_twins(F, len(P))
     cand = np.flatnonzero(twin > np.arange(3 * m))
-    angles = _face_angles(P, F).reshape(-1)             # angles[h]: at corner h % 3 of face h // 3
+    angles = face_angles(P, F).reshape(-1)             # angles[h]: at corner h % 3 of face h // 3
 
     def nxt(h):
         return h - h % 3 + (h + 1) % 3
@@ -875,10 +832,10 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
         over = np.flatnonzero(excess > 1e-9)
         h1, excess = h1[over], excess[over]
         a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(twin[h1])]
-        after = _corner_angle(P, a, c, d) + _corner_angle(P, b, c, d) - np.pi
+        after = corner_angle(P, a, c, d) + corner_angle(P, b, c, d) - np.pi
         scale = np.sum((U[a] - U[b]) ** 2, axis=1) + np.sum((U[c] - U[d]) ** 2, axis=1)
-        ok = ((after < excess - 1e-12) & (_orient(U, a, d, c) > 1e-12 * scale)
-              & (_orient(U, d, b, c) > 1e-12 * scale))
+        ok = ((after < excess - 1e-12) & (orient(U, a, d, c) > 1e-12 * scale)
+              & (orient(U, d, b, c) > 1e-12 * scale))
         if not ok.any():
             break
         h1, pr = h1[ok], excess[ok]
@@ -908,7 +865,7 @@ def _flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, round
         for t, h in ((t_ad, g1), (t_ca, g1 + 2), (t_db, g2), (t_bc, g2 + 1)):
             twin[t[t >= 0]] = h[t >= 0]
         changed = np.concatenate([g1, g2]) // 3
-        angles.reshape(m, 3)[changed] = _face_angles(P, F[changed])
+        angles.reshape(m, 3)[changed] = face_angles(P, F[changed])
         cand = np.concatenate([g1, g1 + 1, g1 + 2, g2, g2 + 1, g2 + 2, lost])
     return F
 
@@ -926,7 +883,7 @@ def _peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: fl
     n, m = len(P), len(F)
     deg = np.diff(graph.indptr)
     src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
-    twin = _twins(F, n)
+    twin = half_edge_twins(F, n)
     alive = np.ones(m, bool)
     for _ in range(rounds):
         # Boundary half-edges: alive, with no alive face across.
@@ -976,7 +933,7 @@ def _peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: fl
 def _outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
     """Faces flagged ``bad`` that reach the triangulation's outside through bad faces only."""
     m = len(F)
-    twin = _twins(F, n)
+    twin = half_edge_twins(F, n)
     h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
     a, b = h // 3, twin[h] // 3
     both = bad[a] & bad[b]

@@ -31,7 +31,7 @@ import numpy as np
 from .errors import MeshError, first_few
 from .linear import disk_check
 from .mesh import TriMesh
-from .points import _orient
+from .triangles import locate, signed_area2
 
 #: The four children of a triangle ``(v1, v2, v3)`` in the dyadic refinement, as indices into
 #: ``(v1, v2, v3, w1, w2, w3)`` (``w_i`` the midpoint of the edge opposite ``v_i``),
@@ -81,78 +81,6 @@ def dyadic_refine(faces: np.ndarray, n_vertices: int):
     return children.reshape(4 * m, 3), parents, count == 1
 
 
-def locate(uv: np.ndarray, faces: np.ndarray, query: np.ndarray, *, tol: float = 1e-7):
-    """Point location in a planar triangulation.
-
-    **Arguments:** ``uv (n, 2)``, ``faces (m, 3)`` (a one-to-one planar triangulation),
-    ``query (k, 2)``.
-
-    **Returns:** ``(face (k,) int, bary (k, 3))``: the containing face of each query point and
-    its barycentric coordinates there (a point on an edge gets one of its faces; a point
-    outside by less than ``tol`` in barycentric terms, as rounding leaves points placed on
-    the boundary, gets its face with the coordinates clipped).  Raises :class:`MeshError` naming the points further outside.
-
-    A uniform grid of about ``m`` cells holds the faces whose bounding box meets each cell;
-    each query tests the faces of its cell and keeps the one it is deepest inside.
-    """
-    uv = np.asarray(uv, np.float64)
-    F = np.asarray(faces, np.int64)
-    q = np.asarray(query, np.float64)
-    T = uv[F]                                               # (m, 3, 2)
-    lo, hi = uv[F].min(1), uv[F].max(1)
-    box_lo, box_hi = lo.min(0), hi.max(0)
-    g = max(1, int(np.sqrt(F.shape[0])))
-    cell = np.maximum((box_hi - box_lo) / g, 1e-300)
-
-    def cell_of(x):
-        return np.clip(np.floor((x - box_lo) / cell).astype(np.int64), 0, g - 1)
-
-    c0, c1 = cell_of(lo), cell_of(hi)
-    nx, ny = c1[:, 0] - c0[:, 0] + 1, c1[:, 1] - c0[:, 1] + 1
-    cnt = nx * ny
-    tri = np.repeat(np.arange(F.shape[0]), cnt)
-    local = np.arange(tri.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    cx = c0[tri, 0] + local % nx[tri]
-    cy = c0[tri, 1] + local // nx[tri]
-    cid = cx * g + cy
-    order = np.argsort(cid, kind="stable")
-    cell_faces = tri[order]
-    ptr = np.zeros(g * g + 1, np.int64)
-    np.cumsum(np.bincount(cid, minlength=g * g), out=ptr[1:])
-
-    qc = cell_of(q)
-    qcell = qc[:, 0] * g + qc[:, 1]
-    k = ptr[qcell + 1] - ptr[qcell]
-    qi = np.repeat(np.arange(q.shape[0]), k)
-    cand = cell_faces[np.repeat(ptr[qcell], k) + np.arange(qi.size) - np.repeat(np.cumsum(k) - k, k)]
-    bary = _barycentric(T[cand], q[qi])
-    depth = bary.min(1)
-    # Per query, the candidate it is deepest inside: sort by (query, -depth), take the first.
-    best = np.lexsort((-depth, qi))
-    head = best[np.concatenate([[True], qi[best][1:] != qi[best][:-1]])] if best.size else best
-    face = np.full(q.shape[0], -1, np.int64)
-    out = np.full((q.shape[0], 3), np.nan)
-    face[qi[head]] = cand[head]
-    out[qi[head]] = bary[head]
-    bad = np.flatnonzero((face < 0) | ~(np.nan_to_num(out.min(1), nan=-np.inf) >= -tol))
-    if bad.size:
-        raise MeshError(
-            f"remesh: {bad.size} sample points lie outside the parameter domain (points "
-            f"{first_few(q[bad].round(6).tolist(), limit=3)}); the base domain must lie inside "
-            "the parameterization's image: use a convex boundary map (circle, square) or fewer corners.")
-    out = np.clip(out, 0.0, None)
-    return face, out / out.sum(1, keepdims=True)
-
-
-def _barycentric(T: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates ``(k, 3)`` of points ``p (k, 2)`` in triangles ``T (k, 3, 2)``."""
-    a, b, c = T[:, 0], T[:, 1], T[:, 2]
-    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-    l1 = ((b[:, 0] - p[:, 0]) * (c[:, 1] - p[:, 1]) - (b[:, 1] - p[:, 1]) * (c[:, 0] - p[:, 0])) / det
-    l2 = ((c[:, 0] - p[:, 0]) * (a[:, 1] - p[:, 1]) - (c[:, 1] - p[:, 1]) * (a[:, 0] - p[:, 0])) / det
-    return np.stack([l1, l2, 1.0 - l1 - l2], axis=1)
-
-
 class _BoundaryCurve:
     """The parameter domain's boundary polygon, by arc length ``s`` in ``[0, L)``."""
 
@@ -199,7 +127,7 @@ def base_domain(uv: np.ndarray, loop: np.ndarray, corners: int | np.ndarray = 6)
     centre = pts.mean(0)
     uv0 = np.concatenate([pts, centre[None]])
     faces0 = np.stack([np.arange(c), (np.arange(c) + 1) % c, np.full(c, c)], axis=1)
-    area = _signed_area2(uv0, faces0)
+    area = signed_area2(uv0, faces0)
     if np.all(area < 0):                       # the loop runs clockwise in the plane
         faces0 = faces0[:, [1, 0, 2]]
         area = -area
@@ -208,11 +136,6 @@ def base_domain(uv: np.ndarray, loop: np.ndarray, corners: int | np.ndarray = 6)
                         "parameter domain is not star-shaped from the corners' centre; use a convex "
                         "boundary map (circle, square).")
     return uv0, faces0, np.concatenate([s, [np.nan]]), curve
-
-
-def _signed_area2(uv, F):
-    """Twice the signed areas of the planar faces ``F`` over ``uv``."""
-    return _orient(uv, F[:, 0], F[:, 1], F[:, 2])
 
 
 def refine_domain(uv0, faces0, s0, curve: _BoundaryCurve, levels: int):
@@ -270,13 +193,13 @@ def remesh(mesh: TriMesh, uv, levels: int = 4, *, corners=6) -> TriMesh:
     U = np.asarray(uv, np.float64)
     if U.shape != (mesh.n_vertices, 2) or not np.all(np.isfinite(U)):
         raise MeshError(f"remesh: uv must be a finite ({mesh.n_vertices}, 2) array, got shape {U.shape}.")
-    flipped = np.flatnonzero(_signed_area2(U, mesh.faces) <= 0)
+    flipped = np.flatnonzero(signed_area2(U, mesh.faces) <= 0)
     if flipped.size:
         raise MeshError(f"remesh: the parameterization is not one-to-one: faces {first_few(flipped)} "
                         "are flipped or degenerate in the UVs; use a convex-combination map.")
     uv0, F0, s0, curve = base_domain(U, t.boundary_loops[0], corners)
     uvj, H = refine_domain(uv0, F0, s0, curve, int(levels))
-    bad = np.flatnonzero(_signed_area2(uvj, H.faces[-1]) <= 0)
+    bad = np.flatnonzero(signed_area2(uvj, H.faces[-1]) <= 0)
     if bad.size:
         raise MeshError(f"remesh: {bad.size} refined triangles fold over where the boundary bends "
                         f"(e.g. face {int(bad[0])}); use more corners or a convex boundary map.")

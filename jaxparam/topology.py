@@ -401,6 +401,19 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
         genus=int(genus), dividing_edges=dividing)
 
 
+def half_edge_twins(F: np.ndarray, n: int) -> np.ndarray:
+    """``(3m,)``: the half-edge running the other way along each half-edge ``h = 3 f + j``
+    (from ``F[f, j]`` to ``F[f, j+1]``) of a manifold triangulation ``F (m, 3)`` over ``n``
+    vertices, ``-1`` on the boundary.  Unchecked: for faces already known to be manifold."""
+    src, dst = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(src, dst) * np.int64(n) + np.maximum(src, dst)
+    order = np.argsort(key, kind="stable")
+    pair = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+    twin = np.full(key.size, -1, np.int64)
+    twin[order[pair]], twin[order[pair + 1]] = order[pair + 1], order[pair]
+    return twin
+
+
 def permute_rows(indptr: np.ndarray, old_of: np.ndarray):
     """Reorder the rows of a CSR structure: new row ``r`` is old row ``old_of[r]``.
 

@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 
 import jaxparam as jp
 from jaxparam import points as PT
+from jaxparam.triangles import orient
 from jaxparam.errors import MeshFileError, PointCloudError
 from conftest import data_path
 
@@ -191,7 +192,7 @@ def test_3d_flips_keep_a_one_to_one_triangulation_and_bring_faces_to_the_surface
     assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
     F0 = PT._delaunay(U)
     F1 = PT._flip_towards_3d_delaunay(F0, P, U, 100)
-    assert len(F1) == len(F0) and PT._orient(U, *F1.T).min() > 0
+    assert len(F1) == len(F0) and orient(U, *F1.T).min() > 0
     assert jp.TriMesh(P, F1).topology.is_disk
     assert _non_delaunay_3d(F0, P, U) > 0 and _non_delaunay_3d(F1, P, U) == 0
     # Distance of face points to the cylinder, before and after.
@@ -209,7 +210,7 @@ def test_delaunay_fallback_without_triangle_matches(monkeypatch):
     monkeypatch.setitem(sys.modules, "triangle", None)          # import triangle -> ImportError
     G = PT._delaunay(U)
     key = lambda T: {tuple(sorted(f)) for f in T.tolist()}
-    assert key(F) == key(G) and PT._orient(U, *G.T).min() > 0
+    assert key(F) == key(G) and orient(U, *G.T).min() > 0
 
 
 def test_point_graph_does_not_depend_on_the_input_order(surface_points):

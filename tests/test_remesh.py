@@ -9,7 +9,8 @@ import pytest
 import jaxparam as jp
 from jaxparam.cli import main
 from jaxparam.errors import MeshError, TopologyError
-from jaxparam.remesh import base_domain, dyadic_refine, hierarchy_from_faces, locate, refine_domain
+from jaxparam.remesh import base_domain, dyadic_refine, hierarchy_from_faces, refine_domain
+from jaxparam.triangles import locate
 
 
 def area2(U, F):
