@@ -105,10 +105,8 @@ def run_one(method: str, refine: int) -> dict:
         S = jp.linear.interior_system(mesh.topology)
         stages["pattern"] = time.perf_counter() - t
         # Factorization and solve apart, on the assembled system.
-        R = jp.weights.ring_entries(mesh.topology)
-        vals, rhs = jp.linear._assemble_jit(
-            w, jax.numpy.zeros((mesh.topology.boundary.size, 2)), R.row, S.ii_entries, S.ib_entries,
-            S.bd_slot, S.ib_row, S.diag_pos, S.off_pos, ni=R.n_rows, nnz=S.pattern.nnz)
+        vals, rhs = jp.combination.assemble(S, w, jax.numpy.zeros((mesh.topology.boundary.size, 2)),
+                                            normalize=False)
         vals = np.asarray(vals)
         t = time.perf_counter()
         fac = sparse.factorize(S.pattern, vals, symmetric=sym)

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import MeshError, first_few
-from .linear import disk_check
+from .disk import disk_check
 from .mesh import TriMesh
 from .triangles import locate, signed_area2
 

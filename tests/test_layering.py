@@ -2,7 +2,7 @@
 import ast
 from pathlib import Path
 
-ORDER = ["errors", "tol", "memory", "topology", "triangles", "mesh", "geometry", "boundary", "weights", "sparse", "linear",
+ORDER = ["errors", "tol", "memory", "topology", "triangles", "mesh", "disk", "geometry", "boundary", "weights", "sparse", "combination", "linear",
          "metrics", "energies", "optimize", "points", "fitting", "remesh", "wavelets", "manifold",
          "shapes", "plot", "batch", "cli", "demo", "__init__"]
 PKG = Path(__file__).resolve().parents[1] / "jaxparam"

@@ -1,0 +1,67 @@
+"""Disk topology for the disk methods: the check that a mesh is a disk, and hole filling.
+
+:func:`disk_check` refuses meshes that are not one connected genus-0 surface with a boundary,
+naming what is wrong and what to do; :func:`fill_holes` closes every boundary loop but the
+longest with a fan, so a disk with holes can be mapped with the longest loop as its boundary.
+Used by :mod:`jaxparam.linear`, :mod:`jaxparam.optimize`, :mod:`jaxparam.remesh` and the CLI.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import topology as topo
+from .errors import TopologyError, first_few
+from .mesh import TriMesh
+
+__all__ = ["disk_check", "fill_holes"]
+
+
+def disk_check(mesh: TriMesh, where: str) -> None:
+    """Raise :class:`TopologyError` unless the mesh is one connected surface with a boundary."""
+    t = mesh.topology
+    if t.n_components > 1:
+        sizes = np.bincount(t.components[t.components >= 0])
+        raise TopologyError(
+            f"{where}: the mesh has {t.n_components} connected components (vertex counts "
+            f"{first_few(sizes.tolist())}); parameterize each on its own "
+            "(e.g. trimesh's split) or keep the largest.")
+    if t.is_closed:
+        raise TopologyError(
+            f"{where}: the mesh is closed (no boundary, genus {t.genus}); a disk method needs a "
+            "boundary: cut the mesh open along a path, or parameterize it over a base domain with "
+            "jp.manifold_map (closed meshes of any genus).")
+    if t.genus != 0:
+        raise TopologyError(
+            f"{where}: the mesh has genus {t.genus} with {len(t.boundary_loops)} boundary loops; a "
+            "disk method needs genus 0: cut the handles open first.")
+
+
+def fill_holes(mesh: TriMesh) -> tuple[TriMesh, int]:
+    """Close every boundary loop but the longest with a fan around a new centre vertex.
+
+    **Returns:** ``(filled, n_added)``: the new mesh (its first ``n`` vertices
+    are the original ones, in order; the centres, at the loops' centroids, follow).
+    """
+    t = mesh.topology
+    holes = t.boundary_loops[1:]
+    if not holes:
+        return mesh, 0
+    n = t.n_vertices
+    centres = []
+    faces = [t.faces]
+    for h, loop in enumerate(holes):
+        c = n + h
+        # The hole's boundary edges run a -> b with the surface on their left: the fan uses b -> a.
+        faces.append(np.stack([np.roll(loop, -1), loop, np.full(loop.size, c)], axis=1))
+        centres.append(loop)
+    if isinstance(mesh.vertices, jax.core.Tracer):
+        C = jnp.stack([jnp.mean(mesh.vertices[l], axis=0) for l in centres])
+        V = jnp.concatenate([mesh.vertices, C], axis=0)
+    else:
+        V0 = np.asarray(mesh.vertices)
+        V = np.concatenate([V0, np.stack([V0[l].mean(0) for l in centres])])
+    F = np.concatenate(faces)
+    filled = TriMesh(V, F, topo.build(F, n + len(holes), where="fill_holes"), validate=False)
+    return filled, len(holes)
