@@ -1,4 +1,4 @@
-"""Shared fixtures: x64 and strict promotion, tiny generated meshes, the shared data folder."""
+"""Shared fixtures: x64 and rank-promotion errors, tiny generated meshes, the shared data folder."""
 import os
 from pathlib import Path
 
