@@ -246,7 +246,7 @@ def test_factorizations_of_one_pattern_stay_independent():
 def test_pardiso_frees_a_collected_factor():
     P, vals, _ = random_system(symmetric=True, seed=16)
     facs = [S.factorize(P, s * vals, symmetric=True, backend="pardiso") for s in (1.0, 2.0, 3.0)]
-    h = S._handles[P]
+    h = S.pardiso.handles[P]
     assert sum(t is not None for t in h.owner) == 3
     del facs[1]
     gc.collect()
@@ -268,9 +268,9 @@ def test_pattern_collected_before_a_compiled_solve_runs():
 
     g = jax.jit(lambda v: S.solve(make(), v, jnp.ones(N)))       # the pattern lives while tracing only
     np.testing.assert_allclose(g(vals), np.linalg.solve(D, np.ones(N)), atol=1e-12)
-    with S._cache_lock:
-        S._cache.clear()
+    with S.differentiable.cache_lock:
+        S.differentiable.cache.clear()
     gc.collect()
-    assert len(uids) == 1 and uids[0] not in S._registry
+    assert len(uids) == 1 and uids[0] not in S.pattern.registry
     np.testing.assert_allclose(g(2 * vals), np.linalg.solve(2 * D, np.ones(N)), atol=1e-12)
-    assert uids[0] in S._registry and len(uids) == 1
+    assert uids[0] in S.pattern.registry and len(uids) == 1
