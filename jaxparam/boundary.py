@@ -13,6 +13,7 @@ import numpy as np
 from . import tol
 from .errors import MeshError, first_few
 from .geometry import safe_norm
+from .options import choose
 
 __all__ = [
     "arc_parameters", "circle", "square", "polygon", "plane", "boundary_uv", "is_convex_polygon",
@@ -30,10 +31,9 @@ def arc_parameters(loop_xyz, spacing: str = "chord"):
     ``"uniform"``: ``i / k``.
     """
     k = loop_xyz.shape[0]
+    spacing = choose(spacing, SPACINGS, what="spacing", where="boundary")
     if spacing == "uniform":
         return jnp.arange(k, dtype=jnp.float64) / k
-    if spacing != "chord":
-        raise MeshError(f"boundary: unknown spacing {spacing!r}; use one of {SPACINGS}.")
     seg = safe_norm(jnp.roll(loop_xyz, -1, axis=0) - loop_xyz)
     cum = jnp.concatenate([jnp.zeros(1), jnp.cumsum(seg)[:-1]])
     return cum / jnp.sum(seg)
@@ -122,14 +122,13 @@ def boundary_uv(loop_xyz, shape="circle", *, spacing: str = "chord", corners=Non
     """
     k = loop_xyz.shape[0]
     if isinstance(shape, str):
+        shape = choose(shape, SHAPES, what="boundary", where="boundary")
         if shape == "circle":
             return circle(loop_xyz, spacing=spacing)
         if shape == "square":
             return square(loop_xyz, spacing=spacing, corners=corners)
         if shape == "plane":
             return plane(loop_xyz)
-        raise MeshError(f"boundary: unknown boundary {shape!r}; use one of {SHAPES}, a (k, 2) "
-                        "array of boundary UVs, or {'polygon': corners}.")
     if isinstance(shape, dict) and "polygon" in shape:
         return polygon(loop_xyz, shape["polygon"], spacing=spacing, corner_positions=corners)
     uv = jnp.asarray(shape, dtype=jnp.float64)

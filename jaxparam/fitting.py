@@ -20,6 +20,7 @@ import numpy as np
 
 from .errors import MeshError
 from .mesh import TriMesh, grid_faces
+from .options import choose
 
 __all__ = ["Surface", "fit_surface", "KINDS"]
 
@@ -76,6 +77,7 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
         surf = jp.fit_surface(mesh, uv, kind="clough_tocher")
         patch = surf.sample(100)
     """
+    kind = choose(kind, KINDS, what="kind", where="fit_surface")
     X = np.asarray(mesh_or_points.vertices if isinstance(mesh_or_points, TriMesh) else mesh_or_points,
                    np.float64)
     U = np.asarray(uv, np.float64)
@@ -92,8 +94,6 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
 
         f = CloughTocher2DInterpolator(U, X)
         return Surface(kind, bbox, lambda q: np.asarray(f(q)).reshape(-1, 3), 0.0)
-    if kind != "spline":
-        raise MeshError(f"fit_surface: unknown kind {kind!r}; use one of {KINDS}.")
     import warnings
 
     from scipy.interpolate import LSQBivariateSpline

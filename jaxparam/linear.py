@@ -21,6 +21,7 @@ from . import weights as wts
 from .disk import disk_check, fill_holes
 from .errors import MeshError, first_few
 from .mesh import TriMesh
+from .options import choose
 
 __all__ = ["InteriorSystem", "interior_system", "solve_interior", "convex_map",
            "least_squares_map", "fill_holes", "disk_check"]
@@ -67,10 +68,8 @@ def _boundary_slots(V, loop, loop_slot, user_uv, *, shape, spacing, corners, nb)
 def _boundary_key(boundary, k: int):
     """Split a boundary argument into a static key and an optional array of user UVs."""
     if isinstance(boundary, str):
-        if boundary not in bmap.SHAPES:
-            raise MeshError(f"boundary: unknown boundary {boundary!r}; use one of {bmap.SHAPES}, a "
-                            "(k, 2) array of boundary UVs, or {'polygon': corners}.")
-        return boundary, jnp.zeros((k, 2))
+        shape = choose(boundary, bmap.SHAPES, what="boundary", where="boundary")
+        return shape, jnp.zeros((k, 2))
     if isinstance(boundary, dict) and "polygon" in boundary:
         C = np.asarray(boundary["polygon"], np.float64)
         bmap.polygon(np.zeros((3, 3)), C)       # validates shape and convexity up front
@@ -93,8 +92,7 @@ def _boundary_only(V, loop, user_uv, shape, spacing, corners):
 def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, spacing, corners,
               backend, where):
     disk_check(mesh, where)
-    if spacing not in bmap.SPACINGS:
-        raise MeshError(f"{where}: unknown spacing {spacing!r}; use one of {bmap.SPACINGS}.")
+    spacing = choose(spacing, bmap.SPACINGS, what="spacing", where=where)
     work, added = fill_holes(mesh)
     t = work.topology
     V = jnp.asarray(work.vertices, dtype=jnp.float64)
@@ -143,8 +141,7 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
 
         uv = jp.convex_map(mesh, weights="mean_value", boundary="square")
     """
-    if weights not in wts.KINDS:
-        raise MeshError(f"convex_map: unknown weights {weights!r}; use one of {wts.KINDS}.")
+    weights = choose(weights, wts.KINDS, what="weights", where="convex_map")
     symmetric = weights in wts.SYMMETRIC_KINDS
 
     def w_of(work):
