@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import jaxparam as jp
-from jaxparam.cli import report_dict, write_json
+from jaxparam.cli.pipeline import report_dict, write_json
 from jaxparam.plot import plot_checkerboard, plot_uv
 
 
@@ -60,11 +60,11 @@ def main(argv=None) -> int:
     t = time.perf_counter()
     semi = jp.remesh(mesh, jp.convex_map(mesh, boundary="circle"), levels=5)
     sec = time.perf_counter() - t
-    jp.save(out / "graph_surface_remesh.obj", semi, semi.uv)
+    jp.save(out / "graph_surface_remesh.obj", semi.mesh, semi.uv)
     jp.plot.plot_remesh(semi, out / "graph_surface_remesh.png")
     small = jp.wavelets.compress(semi, 0.02)
-    jp.save(out / "graph_surface_remesh_2pc.obj", small, semi.uv)
-    rep = report_dict(semi, semi.uv, seconds={"remesh": sec})
+    jp.save(out / "graph_surface_remesh_2pc.obj", small.mesh, semi.uv)
+    rep = report_dict(semi.mesh, semi.uv, seconds={"remesh": sec})
     summary.append(("graph_surface_remesh (levels 5)", rep["flips"], rep["max_aspect"],
                     rep["sym_dirichlet"], sec))
     # Survey §9: a closed genus-1 mesh over a decimated base domain, remeshed.
@@ -72,10 +72,10 @@ def main(argv=None) -> int:
     base, param = jp.manifold_map(jp.shapes.torus(40, 20), base_faces=40)
     closed = param.remesh(3)
     sec = time.perf_counter() - t
-    jp.save(out / "torus_remesh.obj", closed)
+    jp.save(out / "torus_remesh.obj", closed.mesh)
     jp.plot.plot_remesh(closed, out / "torus_remesh.png")
-    print(f"torus (genus 1): base domain {base.n_faces} faces, remesh {closed.n_faces} faces, "
-          f"genus {closed.topology.genus}, {sec:.2f} s")
+    print(f"torus (genus 1): base domain {base.n_faces} faces, remesh {closed.mesh.n_faces} faces, "
+          f"genus {closed.mesh.topology.genus}, {sec:.2f} s")
     print(f"{'result':48s} {'flips':>5s} {'max σ1/σ2':>10s} {'sym.Dir.':>9s} {'seconds':>8s}")
     for stem, fl, asp, sd, sec in summary:
         print(f"{stem:48s} {fl:5d} {asp:10.3f} {sd:9.3f} {sec:8.3f}")

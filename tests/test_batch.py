@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 import jaxparam as jp
-from jaxparam import batch
-from jaxparam.cli import _clean, flatten_mesh, main
+from jaxparam.cli import batch, main
 
 KEYS = ["file", "status", "error", "error_type", "output", "seconds", "vertices", "faces", "flips",
         "boundary_overlaps", "sym_dirichlet", "mips", "max_aspect", "angle_distortion",
@@ -121,19 +120,20 @@ def test_ray_engine_plumbing(folder, tmp_path, monkeypatch, capsys):
     check_run(folder, out, capsys)
 
 
-def crashing_flatten(mesh, args, say):
-    """Kills its worker process on the mesh named 'disk' (a stand-in for a segfault or OOM kill)."""
-    if mesh.name == "disk":
+def crashing_flatten_file(path, out_path, options):
+    """Kills its worker process on the file named 'disk' (a stand-in for a segfault or OOM kill)."""
+    if os.path.basename(path).startswith("disk."):
         os._exit(7)
-    return flatten_mesh(mesh, args, say=say)
+    return batch.flatten_file(path, out_path, options)
 
 
+@pytest.mark.slow
 def test_a_dying_worker_is_named_and_the_rest_finish(folder, tmp_path):
     files = batch.find_mesh_files(folder)
     outs = batch.output_paths(files, tmp_path)
     opts = {"weights": "uniform", "boundary": "circle", "spacing": "chord", "energy": None,
             "free_boundary": False, "solver": "newton", "max_iters": 10}
-    recs = batch.run_batch(files, outs, opts, flatten=crashing_flatten, clean=_clean, workers=2,
+    recs = batch.run_batch(files, outs, opts, work=crashing_flatten_file, workers=2,
                            say=lambda m: None)
     assert [r["status"] for r in recs] == ["error", "error", "ok"]
     assert recs[0]["error_type"] == "MeshFileError"

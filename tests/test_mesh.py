@@ -93,3 +93,24 @@ def test_save_is_atomic(tmp_path, grid_mesh):
         jp.save(p, grid_mesh, np.zeros((3, 2)))
     assert not p.exists()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_io_package_holds_the_readers_and_writers(tmp_path, grid_mesh):
+    import jaxparam.io as io
+    import jaxparam.mesh as mesh_module
+
+    assert jp.load is io.load and jp.save is io.save and jp.load_points is io.load_points
+    assert jp.points.load_points is io.load_points
+    assert not hasattr(mesh_module, "load") and not hasattr(mesh_module, "atomic_write")
+    p = tmp_path / "g.obj"
+    io.save(p, grid_mesh)
+    V, F, uv = io.read_obj(p)
+    np.testing.assert_array_equal(F, grid_mesh.faces)
+    assert uv is None and V.shape == (grid_mesh.n_vertices, 3)
+    io.atomic_write(tmp_path / "t.bin", lambda f: f.write(b"\x00\x01"), mode="wb")
+    assert (tmp_path / "t.bin").read_bytes() == b"\x00\x01"
+
+
+def test_load_points_refuses_a_folder(tmp_path):
+    with pytest.raises(MeshFileError, match=r": is a folder, not a point file"):
+        jp.load_points(tmp_path)

@@ -32,9 +32,9 @@ killer) is replaced and the files it may have held are retried one at a
 time, so the one that kills a worker is named in the summary.  ``ray`` runs
 one task per file on a Ray cluster (``ray.init()`` decides which).
 
-This module sits below ``cli`` in the layering: the CLI registers the
-command and hands it the flatten pipeline (:func:`add_parser`), so the two
-commands can never drift apart.
+Each file goes through :func:`jaxparam.cli.pipeline.flatten_mesh`, the
+pipeline of ``jaxparam flatten``, so the two commands cannot drift apart; the
+exit codes are the pipeline's table.
 """
 from __future__ import annotations
 
@@ -48,18 +48,19 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Callable
 
-from .errors import JaxparamError, MeshFileError, SolverError
-from .mesh import atomic_write, load, save
+from ..errors import MeshFileError
+from ..io import atomic_write, load, save
+from .arguments import add_flatten_options, flatten_options
+from .pipeline import (EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_SOLVER, EXIT_USAGE, clean,
+                       enable_compile_cache, failure, flatten_mesh)
 
-__all__ = ["MESH_EXTENSIONS", "find_mesh_files", "output_paths", "flatten_file", "run_batch",
-           "exit_code", "add_parser"]
+__all__ = ["MESH_EXTENSIONS", "SUMMARY", "find_mesh_files", "output_paths", "flatten_file",
+           "run_batch", "exit_code", "cmd_batch", "add_parser"]
 
 #: File extensions the batch picks up (case-insensitive).
 MESH_EXTENSIONS = (".obj", ".off", ".ply", ".stl")
 
-#: The CLI's exit codes (cli.py documents them): done, internal error, usage, bad input, solver.
-EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INPUT, EXIT_SOLVER = 0, 1, 2, 3, 4
-
+#: The summary's file name inside OUTFOLDER: one JSON object a line, in input order.
 SUMMARY = "summary.jsonl"
 
 
@@ -92,17 +93,15 @@ def output_paths(files, outfolder) -> list[Path]:
     return [out / (f"{p.name}.obj" if p.stem in shared else f"{p.stem}.obj") for p in files]
 
 
-def flatten_file(path, out_path, options: dict, flatten: Callable, clean: Callable) -> dict:
+def flatten_file(path, out_path, options: dict) -> dict:
     """Load, flatten and save one file; never raises for a bad file.
 
-    **Arguments:** ``options`` the flatten options (``weights``, ``boundary``,
-    ``spacing``, ``energy``, ``free_boundary``, ``solver``, ``max_iters``, as
-    ``jaxparam flatten`` parses them); ``flatten(mesh, args, say=...)`` the
-    CLI's pipeline, returning ``(uv, report)``; ``clean`` makes the report
-    JSON-safe.  Both are module-level functions, so they reach a spawned
-    worker by reference.
+    **Arguments:** ``path`` the input mesh file; ``out_path`` the OBJ to write;
+    ``options`` the keyword options of :func:`~jaxparam.cli.pipeline.flatten_mesh`
+    (``weights``, ``boundary``, ``spacing``, ``energy``, ``free_boundary``, ``solver``,
+    ``max_iters``, as ``jaxparam flatten`` parses them).
 
-    **Returns:** the summary record (see the module docstring), with
+    **Returns:** the summary record (see the module docstring), JSON-safe, with
     ``exit_code`` 0, 3, 4 or 1 for this file.
     """
     t0 = time.perf_counter()
@@ -110,31 +109,27 @@ def flatten_file(path, out_path, options: dict, flatten: Callable, clean: Callab
     try:
         mesh = load(path)
         notes: list = []
-        uv, rep = flatten(mesh, argparse.Namespace(**options), say=notes.append)
+        uv, rep = flatten_mesh(mesh, **options, say=notes.append)
         save(out_path, mesh, uv)
         rep = dict(rep)
         rec["stage_seconds"] = rep.pop("seconds", {})
         rec.update(rep)
         rec.update(status="ok", output=str(out_path), notes=notes, exit_code=EXIT_OK)
-    except SolverError as exc:
-        rec.update(error=f"solver failed at stage '{exc.stage}': {exc}",
-                   error_type=type(exc).__name__, exit_code=EXIT_SOLVER)
-    except JaxparamError as exc:
-        rec.update(error=str(exc), error_type=type(exc).__name__, exit_code=EXIT_INPUT)
-    except Exception as exc:  # a bug must not stop the batch; the summary keeps it visible
-        rec.update(error=f"internal error: {type(exc).__name__}: {exc}",
-                   error_type=type(exc).__name__, exit_code=EXIT_INTERNAL)
+    except Exception as exc:  # a bug must not stop the batch either; the summary keeps it visible
+        code, message = failure(exc)
+        rec.update(error=message, error_type=type(exc).__name__, exit_code=code)
     rec["seconds"] = time.perf_counter() - t0
     return clean(rec)
 
 
 def _crash_record(path, message: str) -> dict:
+    """The summary record of a file whose worker process died."""
     return {"file": str(path), "status": "error", "error": message, "error_type": "WorkerDied",
             "output": None, "exit_code": EXIT_INTERNAL, "seconds": None}
 
 
-def _run_pool(jobs, workers: int, report, prepare) -> None:
-    """Run ``jobs`` (``(index, args)``) in a spawn-started process pool.
+def _run_pool(jobs, workers: int, report, work: Callable) -> None:
+    """Run ``work(*args)`` for ``jobs`` (``(index, args)``) in a spawn-started process pool.
 
     A dead worker breaks the whole pool, and with several workers it is not
     known which file killed it: the files left unfinished are then retried in
@@ -143,8 +138,8 @@ def _run_pool(jobs, workers: int, report, prepare) -> None:
     """
     ctx = multiprocessing.get_context("spawn")
     suspects = []
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=prepare) as pool:
-        futures = {pool.submit(flatten_file, *args): (i, args) for i, args in jobs}
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=enable_compile_cache) as pool:
+        futures = {pool.submit(work, *args): (i, args) for i, args in jobs}
         for fut in cf.as_completed(futures):
             i, args = futures[fut]
             try:
@@ -155,9 +150,9 @@ def _run_pool(jobs, workers: int, report, prepare) -> None:
     try:
         for i, args in sorted(suspects, key=lambda j: j[0]):
             if pool is None:
-                pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=prepare)
+                pool = cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=enable_compile_cache)
             try:
-                report(i, pool.submit(flatten_file, *args).result())
+                report(i, pool.submit(work, *args).result())
             except BrokenProcessPool:
                 pool.shutdown(wait=False)
                 pool = None
@@ -169,12 +164,12 @@ def _run_pool(jobs, workers: int, report, prepare) -> None:
             pool.shutdown()
 
 
-def _run_ray(jobs, report) -> None:
+def _run_ray(jobs, report, work: Callable) -> None:
     """One Ray task per file; ``ray.init()`` connects to a running cluster or starts a local one."""
     import ray
 
     ray.init(ignore_reinit_error=True)
-    task = ray.remote(flatten_file)
+    task = ray.remote(work)
     refs = {task.remote(*args): i for i, args in jobs}
     pending = list(refs)
     while pending:
@@ -183,17 +178,19 @@ def _run_ray(jobs, report) -> None:
             report(refs[ref], ray.get(ref))
 
 
-def run_batch(files, outputs, options: dict, *, flatten: Callable, clean: Callable,
-              workers: int = 1, engine: str = "local", prepare: Callable | None = None,
-              say=print) -> list[dict]:
+def run_batch(files, outputs, options: dict, *, workers: int = 1, engine: str = "local",
+              say=print, work: Callable = flatten_file) -> list[dict]:
     """Flatten ``files`` into ``outputs`` (same length); returns the records in input order.
 
-    ``say`` receives one progress line per finished file; ``prepare()`` runs
-    once in each process that flattens (the CLI enables JAX's persistent
-    compilation cache there).  See :func:`flatten_file` for ``options``,
-    ``flatten`` and ``clean``.
+    **Arguments:** ``options`` as for :func:`flatten_file`; ``workers`` processes (1: this
+    one); ``engine`` ``"local"`` or ``"ray"``; ``say`` receives one progress line per
+    finished file; ``work(path, out_path, options) -> record`` the job run for each file
+    (default :func:`flatten_file`; a module-level function, so a spawned worker finds it
+    by reference; tests pass one that kills its worker).
+
+    JAX's persistent compilation cache is enabled in each local process that flattens.
     """
-    jobs = [(i, (str(f), str(o), options, flatten, clean)) for i, (f, o) in enumerate(zip(files, outputs))]
+    jobs = [(i, (str(f), str(o), options)) for i, (f, o) in enumerate(zip(files, outputs))]
     records: list = [None] * len(jobs)
     done = [0]
 
@@ -204,14 +201,13 @@ def run_batch(files, outputs, options: dict, *, flatten: Callable, clean: Callab
         say(f"[{done[0]}/{len(jobs)}] {Path(rec['file']).name}: {state}")
 
     if engine == "ray":
-        _run_ray(jobs, report)
+        _run_ray(jobs, report, work)
     elif workers <= 1:
-        if prepare is not None:
-            prepare()
+        enable_compile_cache()
         for i, args in jobs:
-            report(i, flatten_file(*args))
+            report(i, work(*args))
     else:
-        _run_pool(jobs, workers, report, prepare)
+        _run_pool(jobs, workers, report, work)
     return records
 
 
@@ -225,6 +221,7 @@ def exit_code(records) -> int:
 
 
 def _positive_int(text: str) -> int:
+    """argparse ``type=`` for ``--workers``: an integer of at least 1."""
     try:
         value = int(text)
     except ValueError:
@@ -234,12 +231,8 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _flatten_options(args) -> dict:
-    return {k: getattr(args, k) for k in ("weights", "boundary", "spacing", "energy",
-                                          "free_boundary", "solver", "max_iters")}
-
-
-def _cmd_batch(args, *, flatten: Callable, clean: Callable, prepare: Callable | None) -> int:
+def cmd_batch(args) -> int:
+    """``jaxparam batch FOLDER -o OUTFOLDER``: see the module docstring."""
     def err(msg):
         print(f"jaxparam batch: {msg}", file=sys.stderr)
 
@@ -260,9 +253,8 @@ def _cmd_batch(args, *, flatten: Callable, clean: Callable, prepare: Callable | 
         raise MeshFileError(f"batch: {args.output} is a file, not a folder; give a folder to -o.")
     outputs = output_paths(files, out)
     t = time.perf_counter()
-    records = run_batch(files, outputs, _flatten_options(args), flatten=flatten, clean=clean,
-                        workers=args.workers, engine=args.engine, prepare=prepare,
-                        say=lambda m: print(m, file=sys.stderr))
+    records = run_batch(files, outputs, flatten_options(args), workers=args.workers,
+                        engine=args.engine, say=lambda m: print(m, file=sys.stderr))
     atomic_write(out / SUMMARY, lambda f: f.writelines(json.dumps(r) + "\n" for r in records))
     ok = sum(r["status"] == "ok" for r in records)
     print(f"{out / SUMMARY}: {ok} of {len(records)} files flattened "
@@ -270,14 +262,8 @@ def _cmd_batch(args, *, flatten: Callable, clean: Callable, prepare: Callable | 
     return exit_code(records)
 
 
-def add_parser(sub, *, add_flatten_options: Callable, flatten: Callable, clean: Callable,
-               prepare: Callable | None = None) -> None:
-    """Add ``batch`` to the CLI's subparsers.
-
-    **Arguments:** ``add_flatten_options(parser)`` adds the flatten options;
-    ``flatten`` and ``clean`` as in :func:`flatten_file` (the CLI's own
-    ``flatten_mesh`` and ``_clean``); ``prepare`` as in :func:`run_batch`.
-    """
+def add_parser(sub) -> None:
+    """Add ``batch`` to the CLI's subparsers ``sub``, with the flatten options."""
     p = sub.add_parser("batch", help="flatten every mesh file of a folder",
                        description="Flatten every .obj/.off/.ply/.stl file of FOLDER into "
                                    "OUTFOLDER/<stem>.obj; one bad file never stops the rest, "
@@ -289,4 +275,4 @@ def add_parser(sub, *, add_flatten_options: Callable, flatten: Callable, clean: 
     p.add_argument("--workers", type=_positive_int, default=1,
                    help="processes working in parallel (default 1: this process)")
     p.add_argument("--engine", choices=["local", "ray"], default="local")
-    p.set_defaults(func=lambda args: _cmd_batch(args, flatten=flatten, clean=clean, prepare=prepare))
+    p.set_defaults(func=cmd_batch)

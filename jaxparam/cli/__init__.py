@@ -1,0 +1,116 @@
+"""The ``jaxparam`` command.
+
+Exit codes: 0 done, 2 usage, 3 bad input (the message names the problem and
+where), 4 a solver failed (the message names the stage), 130 interrupted
+(``batch`` adds 1: an unexpected error in some file).  Named options take
+either spelling on the command line (``shape-preserving`` or
+``shape_preserving``); defaults are those of the library functions the
+options mirror.
+
+Modules: :mod:`.pipeline` (the flatten pipeline, reports, exit codes: library
+code), :mod:`.arguments` (named options and API defaults), :mod:`.commands`
+(the subcommand handlers), :mod:`.batch` (``jaxparam batch``).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..errors import JaxparamError
+from ..fitting import KINDS as FIT_KINDS
+from ..fitting import Surface, fit_surface
+from ..linear import convex_map
+from ..manifold import ManifoldParameterization, manifold_map
+from ..options import default_of
+from ..points import WEIGHTS as POINT_WEIGHTS
+from ..points import reconstruct_surface
+from ..remesh import remesh
+from ..wavelets import WAVELETS, compress
+from ..weights import KINDS as WEIGHT_KINDS
+from . import batch, commands
+from .arguments import add_flatten_options, add_mirrored, add_named
+from .pipeline import EXIT_INTERRUPTED, failure, flatten_mesh, report_dict, write_json
+
+__all__ = ["main", "build_parser", "flatten_mesh", "report_dict", "write_json"]
+
+
+def _command(sub, name: str, help: str, func, input_name: str = "mesh", *, report: bool = True,
+             plot: bool = True) -> argparse.ArgumentParser:
+    """Add subcommand ``name`` run by ``func(args)``, with its input, ``-o/--output`` and, when
+    asked, ``--report`` and ``--plot``; returns its parser for the further options."""
+    p = sub.add_parser(name, help=help)
+    p.add_argument(input_name)
+    p.add_argument("-o", "--output", required=True)
+    if report:
+        p.add_argument("--report", help="write the report (JSON) here")
+    if plot:
+        p.add_argument("--plot", help="draw a picture (PNG) here")
+    p.set_defaults(func=func)
+    return p
+
+
+def _add_commands(sub) -> None:
+    """Every subcommand but ``batch``."""
+    p = sub.add_parser("info", help="topology facts of a mesh")
+    p.add_argument("mesh")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=commands.cmd_info)
+
+    add_flatten_options(_command(sub, "flatten", "parameterize a disk mesh", commands.cmd_flatten))
+
+    p = _command(sub, "meshless", "parameterize and triangulate unorganized points",
+                 commands.cmd_meshless, "points")
+    add_mirrored(p, "--k", reconstruct_surface, "k", "neighbours per point")
+    add_named(p, "--weights", POINT_WEIGHTS, default_of(reconstruct_surface, "weights"))
+    add_named(p, "--boundary", ["circle", "square"], default_of(reconstruct_surface, "boundary"))
+
+    p = _command(sub, "fit", "a smooth surface over a mesh's UVs", commands.cmd_fit, report=False)
+    add_named(p, "--surface", FIT_KINDS, default_of(fit_surface, "kind"), what="surface kind")
+    add_mirrored(p, "--resolution", Surface.sample, "resolution",
+                 "samples along each side of the grid")
+
+    p = _command(sub, "remesh", "remesh a disk mesh with subdivision connectivity",
+                 commands.cmd_remesh)
+    add_mirrored(p, "--levels", remesh, "levels", "subdivision levels")
+    add_mirrored(p, "--base-faces", remesh, "base_faces", "triangles of the base domain, a fan")
+    add_named(p, "--weights", WEIGHT_KINDS, default_of(convex_map, "weights"))
+    add_named(p, "--boundary", ["circle", "square"], default_of(convex_map, "boundary"))
+
+    p = _command(sub, "compress", "wavelet compression of a mesh made by jaxparam remesh",
+                 commands.cmd_compress, plot=False)
+    add_mirrored(p, "--keep", compress, "keep", "fraction of wavelet coefficients kept",
+                 type=float)
+    add_named(p, "--wavelet", WAVELETS, default_of(compress, "wavelet"))
+
+    p = _command(sub, "manifold", "parameterize a closed mesh of any genus over a base domain "
+                 "and remesh it with subdivision connectivity", commands.cmd_manifold)
+    add_mirrored(p, "--base-faces", manifold_map, "base_faces", "triangles of the base domain")
+    add_mirrored(p, "--levels", ManifoldParameterization.remesh, "levels", "subdivision levels")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``jaxparam`` argument parser: one subparser per command, ``func`` its handler."""
+    ap = argparse.ArgumentParser(prog="jaxparam", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    _add_commands(sub)
+    batch.add_parser(sub)
+    return ap
+
+
+def main(argv=None) -> int:
+    """Run ``jaxparam`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+
+    Usage errors exit through argparse (``SystemExit(2)``); library errors are printed as
+    ``jaxparam <command>: <message>`` and give 3 or 4 (:func:`~.pipeline.failure`).
+    """
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except JaxparamError as exc:
+        code, message = failure(exc)
+        print(f"jaxparam {args.command}: {message}", file=sys.stderr)
+        return code
+    except KeyboardInterrupt:
+        print(f"jaxparam {args.command}: interrupted; no partial output was written",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED

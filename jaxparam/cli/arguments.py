@@ -1,0 +1,85 @@
+"""Command-line options that mirror the API: named choices in either spelling, and defaults
+read from the API functions' signatures (:func:`jaxparam.options.default_of`).
+
+A named option (``--weights``, ``--boundary``, ``--solver``, ...) accepts
+``shape-preserving`` and ``shape_preserving`` alike; the parsed value is the hyphenated
+command-line spelling, which reports print, and handlers call the library with
+:func:`jaxparam.options.canonical` of it.
+"""
+from __future__ import annotations
+
+import argparse
+from typing import Any, Callable, Iterable
+
+from .. import boundary as bmap
+from .. import weights as wts
+from ..energies import ENERGIES
+from ..linear import convex_map
+from ..optimize import SOLVERS, minimize
+from ..options import choose, default_of, hyphenated
+
+from .pipeline import FLATTEN_OPTIONS
+
+__all__ = ["Named", "add_named", "add_mirrored", "add_flatten_options", "flatten_options"]
+
+
+class Named:
+    """An argparse ``type=`` that accepts one of ``choices`` in either spelling.
+
+    **Arguments:** ``choices`` the valid names (canonical or hyphenated); ``what`` the
+    option's name in the error message (``"weights"``).
+
+    Calling it with a string returns the hyphenated spelling, or raises
+    :class:`argparse.ArgumentTypeError` (a usage error, exit 2) listing the choices.
+    """
+
+    def __init__(self, choices: Iterable[str], what: str):
+        self.choices = tuple(hyphenated(c) for c in choices)
+        self.what = what
+        self.__name__ = what            # argparse names the type in some messages
+
+    def __call__(self, text: str) -> str:
+        return hyphenated(choose(text, self.choices, what=self.what, where="",
+                                 error=argparse.ArgumentTypeError))
+
+    @property
+    def metavar(self) -> str:
+        """``{a,b,c}``, as argparse shows ``choices=``."""
+        return "{" + ",".join(self.choices) + "}"
+
+
+def add_named(p: argparse.ArgumentParser, flag: str, choices: Iterable[str], default,
+              help: str | None = None, *, what: str | None = None) -> None:
+    """Add the named option ``flag`` to ``p``: either spelling accepted, the choices listed in
+    the help, ``default`` (a name, or None) shown hyphenated."""
+    kind = Named(choices, what or flag.lstrip("-").replace("-", " "))
+    default = None if default is None else hyphenated(default)
+    text = (help + " " if help else "") + ("(default: %(default)s)" if default else "")
+    p.add_argument(flag, type=kind, default=default, metavar=kind.metavar, help=text or None)
+
+
+def add_mirrored(p: argparse.ArgumentParser, flag: str, func: Callable, name: str, help: str,
+                 *, type: Callable = int, fallback: Any = None) -> None:
+    """Add ``flag``, an option mirroring parameter ``name`` of ``func``: its default is
+    :func:`~jaxparam.options.default_of` ``(func, name)`` (``fallback`` when ``func`` takes
+    it through ``**options``), shown in the help."""
+    default = default_of(func, name) if fallback is None else default_of(func, name, fallback)
+    p.add_argument(flag, type=type, default=default, help=f"{help} (default: %(default)s)")
+
+
+def add_flatten_options(p: argparse.ArgumentParser) -> None:
+    """The options of ``jaxparam flatten`` (and ``batch``); defaults are
+    :func:`jaxparam.convex_map`'s and :func:`jaxparam.minimize`'s."""
+    add_named(p, "--weights", wts.KINDS, default_of(convex_map, "weights"))
+    add_named(p, "--boundary", bmap.SHAPES, default_of(convex_map, "boundary"))
+    add_named(p, "--spacing", bmap.SPACINGS, default_of(convex_map, "spacing"))
+    add_named(p, "--energy", sorted(ENERGIES), None,
+              "minimize this energy after the convex map (e.g. symmetric-dirichlet, mips)")
+    p.add_argument("--free-boundary", action="store_true")
+    add_named(p, "--solver", SOLVERS, default_of(minimize, "solver"))
+    add_mirrored(p, "--max-iters", minimize, "max_iters", "iterations at most")
+
+
+def flatten_options(args: argparse.Namespace) -> dict:
+    """The keyword options of :func:`~.pipeline.flatten_mesh` from parsed arguments."""
+    return {k: getattr(args, k) for k in FLATTEN_OPTIONS}

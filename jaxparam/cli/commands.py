@@ -1,0 +1,206 @@
+"""The handlers of the ``jaxparam`` subcommands: ``cmd_<name>(args) -> exit code``.
+
+Each loads its input (:func:`begin`), runs the library, and hands the result to
+:func:`finish`, which writes ``-o``, ``--report`` and ``--plot`` all or nothing and prints
+the summary line.  Named options arrive hyphenated (:mod:`.arguments`) and are passed to
+the library as :func:`~jaxparam.options.canonical` names.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..clock import StageClock
+from ..errors import MeshFileError
+from ..io import load, load_points, save
+from ..options import canonical
+from .arguments import flatten_options
+from .pipeline import EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
+
+__all__ = ["begin", "finish", "drawing", "cmd_info", "cmd_flatten", "cmd_meshless", "cmd_fit",
+           "cmd_remesh", "cmd_compress", "cmd_manifold"]
+
+
+def begin(path, *, reader: Callable = load, compile_cache: bool = True):
+    """``(data, clock)``: the input read by ``reader`` (a mesh by default) and a
+    :class:`~jaxparam.clock.StageClock` holding its ``"load"`` seconds.  Turns on the
+    persistent compilation cache first for commands that compile (``compile_cache``)."""
+    if compile_cache:
+        enable_compile_cache()
+    clock = StageClock()
+    data = reader(path)
+    clock("load")
+    return data, clock
+
+
+def drawing(name: str, *data) -> Callable[[str], None]:
+    """``plot(path)`` that draws ``jaxparam.plot.<name>(*data, path)``; matplotlib is imported
+    only when a picture is asked for."""
+    def draw(path) -> None:
+        from .. import plot
+
+        getattr(plot, name)(*data, path)
+
+    return draw
+
+
+def finish(args, mesh, uv, line: str, *, report: dict | None = None,
+           plot: Callable | None = None, save_stage: str | None = None) -> int:
+    """Write the command's outputs, all or nothing, then print ``line``; returns ``EXIT_OK``.
+
+    **Arguments:** ``args`` the parsed command line (``output``, and ``report``/``plot``
+    when the command has them); ``mesh`` and ``uv: (n, 2)`` (or None: ``mesh.uv``) saved
+    to ``args.output``; ``report`` written to ``--report``; ``plot(path)`` draws
+    ``--plot``; ``save_stage`` the key under which the save's seconds go into
+    ``report["seconds"]`` (before the report is written).
+
+    A failure while writing (or Ctrl-C) removes what this run already wrote, then
+    re-raises.
+    """
+    written = []
+    try:
+        clock = StageClock()
+        save(args.output, mesh, uv)
+        written.append(args.output)
+        if save_stage and report is not None:
+            report["seconds"][save_stage] = clock(save_stage)
+        if report is not None and getattr(args, "report", None):
+            write_json(args.report, report)
+            written.append(args.report)
+        if plot is not None and getattr(args, "plot", None):
+            plot(args.plot)
+    except BaseException:
+        for path in written:
+            Path(path).unlink(missing_ok=True)
+        raise
+    print(line)
+    return EXIT_OK
+
+
+def cmd_info(args) -> int:
+    """``jaxparam info MESH [--json]``: the topology facts of a mesh."""
+    mesh, clock = begin(args.mesh, compile_cache=False)
+    info = mesh.topology.summary()
+    info["file"] = str(args.mesh)
+    info["is_disk"] = bool(mesh.topology.is_disk)
+    clock("summary")
+    info["seconds"] = clock.total
+    if args.json:
+        print(json.dumps(clean(info), indent=2))
+    else:
+        for k, v in info.items():
+            print(f"{k:24s} {v}")
+    return EXIT_OK
+
+
+def cmd_flatten(args) -> int:
+    """``jaxparam flatten MESH -o OUT.obj``: :func:`~.pipeline.flatten_mesh` on one file."""
+    mesh, clock = begin(args.mesh)
+    uv, rep = flatten_mesh(mesh, **flatten_options(args), say=lambda m: print(m, file=sys.stderr))
+    rep["seconds"]["load"] = clock["load"]
+    return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
+                  save_stage="save",
+                  line=f"{args.output}: {rep['vertices']} vertices, {rep['faces']} faces, "
+                       f"{rep['flips']} flipped, max aspect {rep['max_aspect']:.3g}")
+
+
+def cmd_meshless(args) -> int:
+    """``jaxparam meshless POINTS -o OUT.obj``: parameterize and triangulate a point set."""
+    from ..points import reconstruct_surface
+
+    P, clock = begin(args.points, reader=load_points)
+    rec = reconstruct_surface(P, k=args.k, weights=canonical(args.weights),
+                              boundary=canonical(args.boundary))
+    clock("meshless_map_and_reconstruction")
+    mesh, uv, used = rec.mesh, np.nan_to_num(np.asarray(rec.uv)), int(rec.points_used.size)
+    rep = report_dict(mesh, rec.uv, seconds=clock, extra={
+        "points": int(P.shape[0]), "points_used": used,
+        "boundary_points": int(rec.boundary.size), "k": args.k, "weights": args.weights})
+    return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
+                  line=f"{args.output}: {P.shape[0]} points, {used} used, {mesh.n_faces} faces, "
+                       f"{rep['flips']} flipped")
+
+
+def cmd_fit(args) -> int:
+    """``jaxparam fit MESH -o OUT.obj``: a smooth surface over a mesh's UVs, sampled on a grid."""
+    from ..fitting import fit_surface
+
+    mesh, clock = begin(args.mesh, compile_cache=False)
+    if mesh.uv is None:
+        raise MeshFileError(f"{args.mesh}: the mesh has no per-vertex texture coordinates (vt); "
+                            "flatten it first: jaxparam flatten MESH -o MESH_WITH_UV.obj")
+    surf = fit_surface(mesh, mesh.uv, kind=canonical(args.surface))
+    out = surf.sample(args.resolution)
+    clock("fit")
+    return finish(args, out, out.uv, plot=drawing("plot_isocurves", surf),
+                  line=f"{args.output}: {args.surface} surface sampled on a {args.resolution}^2 "
+                       f"grid, {out.n_faces} faces ({clock.total:.2f} s)")
+
+
+def cmd_remesh(args) -> int:
+    """``jaxparam remesh MESH -o OUT.obj``: subdivision connectivity over a base domain."""
+    from ..linear import convex_map
+    from ..remesh import remesh
+
+    mesh, clock = begin(args.mesh)
+    uv = convex_map(mesh, weights=canonical(args.weights), boundary=canonical(args.boundary))
+    clock("parameterize")
+    semi = remesh(mesh, uv, levels=args.levels, base_faces=args.base_faces)
+    clock("remesh")
+    rep = report_dict(semi.mesh, semi.uv, seconds=clock, extra={
+        "levels": args.levels, "base_faces": int(semi.base_faces.shape[0]),
+        "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces})
+    return finish(args, semi.mesh, semi.uv, report=rep, plot=drawing("plot_remesh", semi),
+                  line=f"{args.output}: {semi.mesh.n_vertices} vertices, "
+                       f"{semi.mesh.n_faces} faces, "
+                       f"subdivision connectivity of order {args.levels} over "
+                       f"{semi.base_faces.shape[0]} base faces")
+
+
+def cmd_compress(args) -> int:
+    """``jaxparam compress MESH -o OUT.obj --keep F``: wavelet compression of a remeshed mesh;
+    errors are relative to the bounding-box diagonal."""
+    from ..wavelets import compress
+
+    mesh, clock = begin(args.mesh, compile_cache=False)
+    small = compress(mesh, args.keep, wavelet=canonical(args.wavelet))
+    clock("compress")
+    V, X = np.asarray(mesh.vertices), np.asarray(small.mesh.vertices)
+    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    err = np.linalg.norm(X - V, axis=1)
+    rep = {"vertices": small.mesh.n_vertices, "faces": small.mesh.n_faces,
+           "levels": small.hierarchy.levels,
+           "coefficients_kept": small.kept, "stored_fraction": small.stored_fraction,
+           "max_error": float(err.max() / diag), "rms_error": float(np.sqrt(np.mean(err ** 2)) / diag),
+           "wavelet": args.wavelet, "seconds": {"compress": clock.total}}
+    return finish(args, small.mesh, mesh.uv, report=rep,
+                  line=f"{args.output}: kept {small.kept} coefficients, "
+                       f"{100 * small.stored_fraction:.2f} % of the vertices' data; error max "
+                       f"{100 * rep['max_error']:.3f} %, RMS {100 * rep['rms_error']:.3f} % "
+                       "of the bounding-box diagonal")
+
+
+def cmd_manifold(args) -> int:
+    """``jaxparam manifold MESH -o OUT.obj``: a closed mesh of any genus over a base domain,
+    remeshed with subdivision connectivity."""
+    from ..manifold import manifold_map
+
+    mesh, clock = begin(args.mesh, compile_cache=False)
+    base, param = manifold_map(mesh, args.base_faces)
+    clock("parameterize")
+    semi = param.remesh(args.levels)
+    clock("remesh")
+    out = semi.mesh
+    t = out.topology
+    rep = {"vertices": out.n_vertices, "faces": out.n_faces, "genus": int(t.genus),
+           "base_vertices": base.n_vertices, "base_faces": base.n_faces, "levels": args.levels,
+           "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
+           "work_vertices": param.mesh.n_vertices, "seconds": clock}
+    return finish(args, out, None, report=rep, plot=drawing("plot_remesh", semi),
+                  line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, genus "
+                       f"{t.genus}, subdivision connectivity of order {args.levels} over "
+                       f"{base.n_faces} base faces")

@@ -1,0 +1,173 @@
+"""The flatten pipeline and the reports of the ``jaxparam`` command, as library code.
+
+``jaxparam flatten``, ``jaxparam batch`` and ``make demo`` all import from here, so the
+commands cannot drift apart: :func:`flatten_mesh` (convex map, optional minimization,
+report), :func:`report_dict` (the report's metrics), :func:`write_json` and :func:`clean`
+(JSON-safe, all-or-nothing reports), :func:`failure` with the exit-code table, and
+:func:`enable_compile_cache`.
+
+Names in reports are spelled as on the command line (``shape-preserving``); the library
+is called with the canonical names (``shape_preserving``).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..clock import StageClock
+from ..errors import JaxparamError, SolverError
+from ..disk import disk_check
+from ..io import atomic_write
+from ..linear import convex_map
+from ..metrics import distortion
+from ..optimize import minimize
+from ..options import canonical, default_of, hyphenated
+
+__all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE", "EXIT_INPUT", "EXIT_SOLVER",
+           "EXIT_INTERRUPTED", "failure", "enable_compile_cache", "clean", "write_json",
+           "REPORT_KEYS", "report_dict", "FLATTEN_OPTIONS", "flatten_mesh"]
+
+#: Exit codes of ``jaxparam`` and ``jaxparam batch``: done; an unexpected error (a bug;
+#: batch only, the command itself lets it propagate); usage (argparse's); bad input (the
+#: message names the problem and where); a solver failed (the message names the stage);
+#: interrupted by Ctrl-C.
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_INPUT, EXIT_SOLVER, EXIT_INTERRUPTED = 0, 1, 2, 3, 4, 130
+
+
+def failure(exc: BaseException) -> tuple[int, str]:
+    """``(exit code, message)`` for an exception that stopped a command or a batch file.
+
+    A :class:`SolverError` gives ``EXIT_SOLVER`` and ``"solver failed at stage '<stage>':
+    <message>"``; any other :class:`JaxparamError` ``EXIT_INPUT`` and its message; anything
+    else (a bug) ``EXIT_INTERNAL`` and ``"internal error: <type>: <message>"``.
+    """
+    if isinstance(exc, SolverError):
+        return EXIT_SOLVER, f"solver failed at stage '{exc.stage}': {exc}"
+    if isinstance(exc, JaxparamError):
+        return EXIT_INPUT, str(exc)
+    return EXIT_INTERNAL, f"internal error: {type(exc).__name__}: {exc}"
+
+
+def enable_compile_cache() -> None:
+    """Turn on JAX's persistent compilation cache, so a second run skips most compilation.
+
+    The folder is ``$JAXPARAM_CACHE``, else ``~/.cache/jaxparam/jax``; compilations over
+    0.2 s are kept.  An old JAX without the option runs uncached.
+    """
+    import jax
+
+    cache = os.environ.get("JAXPARAM_CACHE", str(Path.home() / ".cache" / "jaxparam" / "jax"))
+    try:
+        jax.config.update("jax_compilation_cache_dir", cache)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+    except Exception:  # an old JAX without the option: run uncached
+        pass
+
+
+def clean(obj):
+    """``obj`` made JSON-safe, recursively through dicts, lists and tuples: non-finite floats
+    become None (``null``), numpy scalars and 0-d arrays plain Python numbers."""
+    if isinstance(obj, dict):
+        return {k: clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [clean(v) for v in obj]
+    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
+        try:
+            obj = obj.item()
+        except (ValueError, AttributeError):
+            pass
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path, data) -> None:
+    """Write ``clean(data)`` as indented JSON to ``path``, all or nothing
+    (:func:`jaxparam.io.atomic_write`)."""
+    atomic_write(path, lambda f: json.dump(clean(data), f, indent=2))
+
+
+#: The metrics a report takes from :func:`jaxparam.distortion`, in order.
+REPORT_KEYS = ("vertices", "faces", "flips", "boundary_overlaps", "sym_dirichlet", "mips",
+               "max_aspect", "angle_distortion", "area_distortion", "unreferenced_vertices",
+               "theorem1")
+
+
+def report_dict(mesh, uv, *, weights=None, seconds=None, extra=None) -> dict:
+    """The report of a parameterization as a plain dict (keys as in DESIGN.md).
+
+    **Arguments:** ``mesh`` and ``uv: (n, 2)`` as for :func:`jaxparam.distortion`;
+    ``weights`` the convex-combination weights used (a name, for the Theorem 1 check) or
+    None; ``seconds`` wall-clock seconds per stage (a dict, e.g. a
+    :class:`~jaxparam.clock.StageClock`), stored under ``"seconds"``; ``extra`` further
+    keys, added last.
+
+    **Returns:** ``{key: value for key in REPORT_KEYS}``, then ``seconds`` and ``extra``.
+    """
+    rep = distortion(mesh, uv, weights=weights).to_dict()
+    out = {k: rep[k] for k in REPORT_KEYS}
+    if seconds is not None:
+        out["seconds"] = seconds
+    if extra:
+        out.update(extra)
+    return out
+
+
+#: The keyword options of :func:`flatten_mesh`, as ``jaxparam flatten`` parses them.
+FLATTEN_OPTIONS = ("weights", "boundary", "spacing", "energy", "free_boundary", "solver",
+                   "max_iters")
+
+
+def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
+                 boundary: str = default_of(convex_map, "boundary"),
+                 spacing: str = default_of(convex_map, "spacing"), energy: str | None = None,
+                 free_boundary: bool = default_of(minimize, "free_boundary"),
+                 solver: str = default_of(minimize, "solver"),
+                 max_iters: int = default_of(minimize, "max_iters"),
+                 say: Callable[[str], object] = print):
+    """The flatten pipeline on a loaded disk mesh: a convex map, then, when ``energy`` is
+    given, :func:`jaxparam.minimize` from it; then the report.
+
+    **Arguments:** ``mesh`` a disk-topology :class:`~jaxparam.TriMesh` (extra boundary loops
+    are filled virtually; ``say`` gets a note); ``weights``, ``boundary``, ``spacing`` as
+    for :func:`jaxparam.convex_map`; ``energy``, ``free_boundary``, ``solver``,
+    ``max_iters`` as for :func:`jaxparam.minimize`; the defaults are those functions'.
+    Names may be spelled with hyphens or underscores.
+
+    **Returns:** ``(uv, report)``: ``uv (n, 2) float64`` numpy, and :func:`report_dict`'s
+    dict with ``seconds`` (``convex_map``, ``minimize`` when run, ``report``) and the
+    options, names spelled with hyphens.
+
+    **Raises:** :class:`~jaxparam.TopologyError` for a mesh that is not a disk, and what
+    :func:`jaxparam.convex_map` and :func:`jaxparam.minimize` raise.
+    """
+    seconds = StageClock()
+    disk_check(mesh, "convex_map")      # before the holes note: no note for a mesh refused anyway
+    holes = max(0, len(mesh.topology.boundary_loops) - 1)
+    extra = {"weights": hyphenated(weights), "boundary": hyphenated(boundary),
+             "spacing": hyphenated(spacing), "holes_filled": holes}
+    if holes:
+        say(f"note: {holes} extra boundary loop(s) (holes) filled virtually; the longest loop "
+            "is mapped to the boundary")
+    seconds.restart()
+    uv = np.asarray(convex_map(mesh, weights=canonical(weights), boundary=canonical(boundary),
+                               spacing=canonical(spacing)))
+    seconds("convex_map")
+    weights_used = canonical(weights)
+    if energy:
+        res = minimize(mesh, canonical(energy), init=uv, free_boundary=free_boundary,
+                       solver=canonical(solver), max_iters=max_iters, verbose=False)
+        seconds("minimize")
+        uv = np.asarray(res.uv)
+        extra.update({"energy": float(res.energy), "iterations": int(res.iterations),
+                      "converged": bool(res.converged), "energy_name": hyphenated(energy),
+                      "solver": hyphenated(solver), "free_boundary": bool(free_boundary)})
+        weights_used = None
+    with seconds.stage("report"):
+        rep = report_dict(mesh, uv, weights=weights_used, seconds=seconds, extra=extra)
+    return uv, rep

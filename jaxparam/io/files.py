@@ -1,0 +1,95 @@
+"""Files on disk: the checks every reader makes first, and the all-or-nothing writer.
+
+Every file jaxparam writes (meshes, JSON reports, batch summaries) goes through
+:func:`atomic_write`: a temporary file in the same folder, renamed over the target when
+complete, so a failure or Ctrl-C midway never leaves a half-written file.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import IO, Callable
+
+from ..errors import MeshFileError
+
+__all__ = ["existing_file", "read_text", "atomic_write"]
+
+
+def existing_file(path, *, what: str = "mesh file") -> Path:
+    """``path`` as a :class:`~pathlib.Path`, checked to name an existing file.
+
+    Raises :class:`MeshFileError` (``"{path}: no such file."``, ``"{path}: is a folder, not a
+    {what}."``) otherwise; messages show ``path`` as given.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise MeshFileError(f"{path}: no such file.")
+    if p.is_dir():
+        raise MeshFileError(f"{path}: is a folder, not a {what}.")
+    return p
+
+
+def read_text(path) -> str:
+    """The text of a mesh file (UTF-8, else Latin-1).
+
+    Raises :class:`MeshFileError` for a missing, unreadable, empty (blank) or binary file.
+    """
+    p = existing_file(path)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise MeshFileError(f"{path}: cannot read the file ({exc.strerror}).") from None
+    if not data.strip():
+        raise MeshFileError(f"{path}: the file is empty.")
+    if b"\x00" in data[:4096]:
+        raise MeshFileError(f"{path}: the file looks binary but its extension says text; "
+                            "is it the right file?")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
+
+
+def _new_file_mode() -> int:
+    """The permissions ``open()`` would give a new file: ``0o666`` less the umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def atomic_write(path, write_fn: Callable[[IO], object], *, mode: str = "w") -> None:
+    """Write ``path`` through ``write_fn(file)`` into a temporary file, then rename.
+
+    **Arguments:** ``path`` the target file (its folder is created when missing);
+    ``write_fn`` writes the whole content to the open file it is given; ``mode`` the
+    ``open`` mode (``"w"`` text, ``"wb"`` bytes).
+
+    A failure or Ctrl-C leaves no partial file behind (an existing ``path`` keeps its old
+    content).  An operating-system error (a folder in the way, no permission, a full
+    disk) becomes a :class:`MeshFileError` naming the path.  The file gets the usual
+    permissions of a new file (``0o666`` less the umask).
+    """
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if path.is_dir():
+            raise IsADirectoryError(21, "is a folder")
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=str(path.parent))
+    except OSError as exc:
+        raise MeshFileError(f"{path}: cannot write the file ({exc.strerror or exc}); give a file "
+                            "path in a folder you can write to.") from exc
+    try:
+        with os.fdopen(fd, mode) as f:
+            write_fn(f)
+        os.chmod(tmp, _new_file_mode())     # mkstemp makes 0600; give the usual permissions
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        if isinstance(exc, OSError) and not isinstance(exc, MeshFileError):
+            raise MeshFileError(f"{path}: writing the file failed ({exc.strerror or exc}); nothing "
+                                "was written: check the free space and permissions.") from exc
+        raise
