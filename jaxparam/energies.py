@@ -28,19 +28,39 @@ from .errors import MeshError
 __all__ = ["Energy", "energy", "ENERGIES", "get", "mips_prop2", "total"]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True)
 class Energy:
     """A per-triangle energy density and how to treat it.
 
-    **Fields:** ``name``; ``density(frame (3, 2), q (3, 2)) -> scalar``;
-    ``scale_invariant`` (unchanged when the UVs are scaled: E1–E4, MIPS,
-    angle, conformal); ``barrier`` (``+inf`` where a triangle is inverted).
+    **Fields:**
+
+    - ``name``: shown in progress bars, reports and error messages.
+    - ``density``: ``density(frame (3, 2), q (3, 2)) -> scalar``, the energy of one
+      triangle (``frame`` from :func:`jaxparam.geometry.local_frames`, ``q`` its UVs).
+    - ``scale_invariant``: unchanged when the UVs are scaled (E1–E4, MIPS, angle,
+      conformal); a free-boundary minimization then keeps the start's area.
+    - ``barrier``: ``+inf`` where a triangle is inverted.
+    - ``of_J``: ``of_J(J (2, 2)) -> scalar`` when the density is a function of the
+      Jacobian alone (``density(frame, q) == of_J(J(frame, q))``), else ``None``; the
+      minimizer then takes Hessians in the 4 entries of ``J`` instead of the 6 UVs.
+    - ``of_sv``: ``of_sv(s1, s2) -> scalar`` when the density is a barrier function of
+      the singular values (``s1 >= s2 > 0``), else ``None``; the minimizer then projects
+      its Hessian in closed form (analytic eigensystems).
+
+    Equality and hash are by value, field by field, and every field is compared: two
+    energies built from the same function object with the same name and flags are
+    equal, so ``jp.energy(f) == jp.energy(f)``.  :func:`jaxparam.minimize`'s kernels take
+    the energy as a static argument of ``jax.jit``, so equal energies share compiled
+    code, and energies from different functions (compared by identity, as Python
+    compares functions) never do.
     """
 
     name: str
     density: Callable = field(repr=False)
     scale_invariant: bool = False
     barrier: bool = True
+    of_J: Callable | None = field(default=None, repr=False)
+    of_sv: Callable | None = field(default=None, repr=False)
 
     def __call__(self, mesh, uv):
         """The mesh energy of ``uv: (n, 2)``: area-weighted mean of the density."""
@@ -61,47 +81,70 @@ def _barrier(det, value):
     return jnp.where(det > 0, value, jnp.inf)
 
 
-def _with_J(of_J):
-    """A density ``f(frame, q) = g(J)`` that also carries ``g`` as ``density.of_J``, so the
-    minimizer can take Hessians in the 4 entries of ``J`` instead of the 6 UV coordinates."""
-    def density(frame, q):
-        return of_J(geo.jacobian_from_frame(frame, q))
-    density.of_J = of_J
-    return density
+# The three callables below are frozen dataclasses, not closures, so that an Energy built
+# twice from the same user function compares (and hashes) equal field by field.
+
+@dataclass(frozen=True)
+class _OfJacobian:
+    """``density(frame, q) = of_J(J)``, ``J`` the triangle's Jacobian (9)."""
+
+    of_J: Callable
+
+    def __call__(self, frame, q):
+        return self.of_J(geo.jacobian_from_frame(frame, q))
 
 
-def _from_sv(fn, *, barrier=True):
-    """Density from a function of the singular values (s1 >= s2 > 0 when unflipped)."""
-    def of_J(J):
+@dataclass(frozen=True)
+class _SingularValueForm:
+    """``of_J(J) = fn(s1, s2)``, ``+inf`` where ``det J <= 0`` when ``barrier``
+    (``|s2|`` otherwise)."""
+
+    fn: Callable
+    barrier: bool
+
+    def __call__(self, J):
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         s1, s2 = geo.singular_values(J)
-        if not barrier:
-            return fn(s1, jnp.abs(s2))
+        if not self.barrier:
+            return self.fn(s1, jnp.abs(s2))
         s2_safe = jnp.where(det > 0, s2, 1.0)
         s1_safe = jnp.where(det > 0, s1, 1.0)
-        return _barrier(det, fn(s1_safe, s2_safe))
-    density = _with_J(of_J)
-    if barrier:
-        density.of_sv = fn      # the energy as a function of (s1, s2), for analytic eigensystems
-    return density
+        return _barrier(det, self.fn(s1_safe, s2_safe))
 
 
-def _from_J(fn, *, barrier=True):
-    """Density from a function of the 2x2 Jacobian."""
-    def of_J(J):
-        if not barrier:
-            return fn(J)
+@dataclass(frozen=True)
+class _JacobianForm:
+    """``of_J(J) = fn(J)``, ``+inf`` where ``det J <= 0`` when ``barrier``."""
+
+    fn: Callable
+    barrier: bool
+
+    def __call__(self, J):
+        if not self.barrier:
+            return self.fn(J)
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         J_safe = jnp.where(det > 0, J, jnp.eye(2))
-        return _barrier(det, fn(J_safe))
-    return _with_J(of_J)
+        return _barrier(det, self.fn(J_safe))
+
+
+def _from_sv(name, fn, scale_invariant=False, *, barrier=True) -> Energy:
+    """An Energy from a function of the singular values (s1 >= s2 > 0 when unflipped)."""
+    of_J = _SingularValueForm(fn, barrier)
+    return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
+                  of_sv=fn if barrier else None)
+
+
+def _from_J(name, fn, scale_invariant=False, *, barrier=True) -> Energy:
+    """An Energy from a function of the 2x2 Jacobian."""
+    of_J = _JacobianForm(fn, barrier)
+    return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J)
 
 
 def _angle_density(frame, q):
     """Sheffer–de Sturler: ``sum_i (theta_i - alpha_i)^2`` over the corners, theta the UV
-    angles, alpha the 3D (= frame) angles; +inf when inverted.  Not convex in the UVs: on
-    camelhead Newton from the Tutte map stops in a local minimum (0.0137), from the MIPS
-    optimum it reaches 0.0044, so start it from ``minimize(mesh, "mips", ...).uv``."""
+    angles, alpha the 3D (= frame) angles; +inf when inverted.  Not convex in the UVs: from
+    the Tutte map Newton can stop in a local minimum, so start it from
+    ``minimize(mesh, "mips", ...).uv`` (benchmarks/README.md has the figures)."""
     alpha = geo.corner_angles(frame, jnp.array([[0, 1, 2]]))[0]
     theta = geo.corner_angles(q, jnp.array([[0, 1, 2]]))[0]
     det = geo.signed_areas(q, jnp.array([[0, 1, 2]]))[0]
@@ -123,24 +166,20 @@ def mips_prop2(frame, q):
 
 ENERGIES: dict[str, Energy] = {
     # Corollary 1 (survey §6): condition numbers, all proper deformation functionals.
-    "condition_2": Energy("condition_2", _from_sv(lambda s1, s2: s1 / s2), True),
-    "mips": Energy("mips", _from_sv(lambda s1, s2: s1 / s2 + s2 / s1), True),
-    "condition_2_squared": Energy("condition_2_squared", _from_sv(lambda s1, s2: (s1 / s2) ** 2), True),
-    "condition_f_squared": Energy("condition_f_squared",
-                                  _from_sv(lambda s1, s2: (s1 / s2) ** 2 + (s2 / s1) ** 2), True),
+    "condition_2": _from_sv("condition_2", lambda s1, s2: s1 / s2, True),
+    "mips": _from_sv("mips", lambda s1, s2: s1 / s2 + s2 / s1, True),
+    "condition_2_squared": _from_sv("condition_2_squared", lambda s1, s2: (s1 / s2) ** 2, True),
+    "condition_f_squared": _from_sv("condition_f_squared",
+                                    lambda s1, s2: (s1 / s2) ** 2 + (s2 / s1) ** 2, True),
     "angle": Energy("angle", _angle_density, True),
     # Maillot et al.: the Green–Lagrange tensor ||J^T J - I||_F^2 (not a deformation functional).
-    "green_lagrange": Energy("green_lagrange",
-                             _from_J(lambda J: jnp.sum((J.T @ J - jnp.eye(2)) ** 2), barrier=False),
-                             False, False),
-    "symmetric_dirichlet": Energy("symmetric_dirichlet",
-                                  _from_sv(lambda s1, s2: s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2)),
-    "arap": Energy("arap", _from_sv(lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, barrier=False),
-                   False, False),
-    "conformal": Energy("conformal", _from_sv(lambda s1, s2: 0.5 * (s1 - s2) ** 2, barrier=False),
-                        True, False),
-    "dirichlet": Energy("dirichlet", _from_J(lambda J: 0.5 * jnp.sum(J ** 2), barrier=False),
-                        False, False),
+    "green_lagrange": _from_J("green_lagrange", lambda J: jnp.sum((J.T @ J - jnp.eye(2)) ** 2),
+                              barrier=False),
+    "symmetric_dirichlet": _from_sv("symmetric_dirichlet",
+                                    lambda s1, s2: s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2),
+    "arap": _from_sv("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, barrier=False),
+    "conformal": _from_sv("conformal", lambda s1, s2: 0.5 * (s1 - s2) ** 2, True, barrier=False),
+    "dirichlet": _from_J("dirichlet", lambda J: 0.5 * jnp.sum(J ** 2), barrier=False),
 }
 
 
@@ -179,11 +218,8 @@ def energy(fn: Callable, *, name: str | None = None, scale_invariant: bool = Fal
     except (TypeError, ValueError):
         params = [None]
     n = len(params)
-    if n == 2:
-        dens = _from_sv(fn, barrier=barrier)
-    elif n == 1:
-        dens = _from_J(fn, barrier=barrier)
-    else:
+    if n not in (1, 2):
         raise MeshError(f"energy: a user energy takes (s1, s2) or (J), got a function of {n} "
                         "arguments.")
-    return Energy(name or getattr(fn, "__name__", "user"), dens, scale_invariant, barrier)
+    make = _from_sv if n == 2 else _from_J
+    return make(name or getattr(fn, "__name__", "user"), fn, scale_invariant, barrier=barrier)

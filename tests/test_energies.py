@@ -123,3 +123,35 @@ def test_mesh_energy_gradient_finite_differences():
     h = 1e-4
     fd = (f(jnp.asarray(uv + h * d)) - f(jnp.asarray(uv - h * d))) / (2 * h)
     assert abs(np.sum(g * d) - fd) <= 1e-7 * max(1.0, abs(fd))
+
+
+def test_energy_equality_is_by_value():
+    f = lambda s1, s2: s1 / s2 + s2 / s1
+    a, b = jp.energy(f), jp.energy(f)
+    assert a == b and hash(a) == hash(b) and a is not b
+    assert a.of_J is not None and a.of_sv is f
+    assert jp.energy(f, name="other") != a
+    assert jp.energy(f, scale_invariant=True) != a
+    assert jp.energy(lambda s1, s2: s1 / s2 + s2 / s1) != a     # another function object
+    assert E.get(f) == a and E.get("mips") is E.ENERGIES["mips"]
+    J = jp.energy(lambda J: jnp.sum(J ** 2))
+    assert J.of_J is not None and J.of_sv is None
+    assert E.ENERGIES["angle"].of_J is None and E.ENERGIES["arap"].of_sv is None
+
+
+def test_equal_energies_share_compiled_code():
+    import functools
+
+    @functools.partial(jax.jit, static_argnames="en")
+    def mean_density(frames, Q, *, en):
+        return E.total(en, frames, jnp.ones(frames.shape[0]), Q)
+
+    frame = triangle(6)
+    frames, Q = frame[None], image(frame, [[1.1, 0.2], [0.0, 0.9]])[None]
+    f = lambda s1, s2: s1 ** 2 + s2 ** 2
+    a = mean_density(frames, Q, en=jp.energy(f))
+    n = mean_density._cache_size()
+    b = mean_density(frames, Q, en=jp.energy(f))            # a fresh, equal energy: no compile
+    assert mean_density._cache_size() == n and float(a) == float(b)
+    mean_density(frames, Q, en=jp.energy(lambda s1, s2: s1 ** 2 + s2 ** 2))
+    assert mean_density._cache_size() == n + 1               # another function: its own code

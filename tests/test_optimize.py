@@ -83,10 +83,9 @@ def test_max_iters_and_silence(mesh, start, capsys):
     res = jp.minimize(mesh, "mips", init=start, max_iters=2, verbose=False)
     assert res.iterations <= 2 and len(res.history) == res.iterations + 1
     assert capsys.readouterr().err == "" and capsys.readouterr().out == ""
-    with pytest.raises(jp.MeshError, match="unknown solver"):
-        jp.minimize(mesh, "mips", solver="adam")
 
 
+@pytest.mark.slow
 def test_implicit_gradient_of_the_optimum():
     mesh = jp.shapes.graph_surface(5)
     F = mesh.faces
@@ -122,14 +121,86 @@ def test_cli_flatten_with_energy(tmp_path, mesh):
 
 @pytest.mark.parametrize("name", ["symmetric_dirichlet", "mips", "condition_f_squared", "condition_2"])
 def test_analytic_eigensystem_projection_matches_eigh(name):
-    from jaxparam import optimize as O
+    from jaxparam.optimize.newton import projected_sv_hessian, psd_project
     en = jp.energies.ENERGIES[name]
     rng = np.random.default_rng(3)
     for _ in range(5):
         J = rng.standard_normal((2, 2))
         if np.linalg.det(J) < 0:
             J[0] *= -1
-        H = jax.hessian(lambda v: en.density.of_J(v.reshape(2, 2)))(jnp.asarray(J.reshape(-1)))
-        ref = np.asarray(O._psd(H[None]))[0]
-        got = np.asarray(O._projected_sv_hessian(jnp.asarray(J), en.density.of_sv))
+        H = jax.hessian(lambda v: en.of_J(v.reshape(2, 2)))(jnp.asarray(J.reshape(-1)))
+        ref = np.asarray(psd_project(H[None]))[0]
+        got = np.asarray(projected_sv_hessian(jnp.asarray(J), en.of_sv))
         np.testing.assert_allclose(got, ref, atol=1e-10 * np.abs(ref).max())
+
+
+def test_solver_registry_names_classes_and_instances(mesh, start):
+    from jaxparam import optimize as O
+    assert O.SOLVERS == {"newton": O.Newton, "lbfgs": O.LBFGS, "bfgs": O.BFGS,
+                         "jaxopt_lbfgs": O.JaxoptLBFGS}
+    for name, cls in O.SOLVERS.items():
+        assert cls.name == name and isinstance(O.solver_from(name), cls)
+        assert O.solver_from(name.replace("_", "-")) == cls()
+    mine = O.Newton(regularization=1e-9)
+    assert O.solver_from(mine) is mine and O.solver_from(O.LBFGS) == O.LBFGS()
+    a = jp.minimize(mesh, "mips", init=start, solver="newton", max_iters=5, verbose=False)
+    b = jp.minimize(mesh, "mips", init=start, solver=O.Newton(), max_iters=5, verbose=False)
+    np.testing.assert_array_equal(a.uv, b.uv)
+    c = jp.minimize(mesh, "mips", init=start, solver=mine, max_iters=5, verbose=False)
+    assert c.solver == "newton" and c.flips == 0 and c.energy <= c.history[0]
+    d = jp.minimize(mesh, "mips", init=start, solver=O.LBFGS(history_length=3, patience=1),
+                    max_iters=5, verbose=False)
+    assert d.solver == "lbfgs" and d.iterations <= 5 and d.energy < d.history[0]
+
+
+def test_unknown_solver_lists_the_registry(mesh):
+    with pytest.raises(jp.MeshError, match=r"unknown solver 'adam'; use one of \['bfgs', "
+                       r"'jaxopt_lbfgs', 'lbfgs', 'newton'\] or pass a solver instance"):
+        jp.minimize(mesh, "mips", solver="adam")
+    with pytest.raises(jp.MeshError, match="unknown solver 3"):
+        jp.minimize(mesh, "mips", solver=3)
+
+
+def test_optimistix_records_each_accepted_step_and_stops_by_the_rules(mesh, start):
+    r = jp.minimize(mesh, "symmetric_dirichlet", init=start, solver="lbfgs", max_iters=4,
+                    verbose=False)
+    assert (r.iterations, r.reason, r.converged) == (4, "max_iters", False)
+    assert len(r.history) == len(r.times) == 5 and np.all(np.diff(r.times) >= 0)
+    z = jp.minimize(mesh, "symmetric_dirichlet", init=start, solver="bfgs", max_iters=0,
+                    verbose=False)
+    assert z.iterations == 0 and len(z.history) == 1
+    np.testing.assert_array_equal(z.uv, start)
+    t = jp.minimize(mesh, "symmetric_dirichlet", init=start, solver="lbfgs", max_seconds=0.0,
+                    verbose=False)
+    assert (t.iterations, t.reason) == (1, "time limit")
+
+
+def count_compiles(fn):
+    """How many XLA compilations ``fn()`` triggers."""
+    events = []
+    listen = lambda event, duration, **kw: events.append(event)
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        fn()
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    return events.count("/jax/core/compile/backend_compile_duration")
+
+
+@pytest.mark.parametrize("solver", ["newton", "lbfgs"])
+def test_equal_energies_share_compiled_code(mesh, start, solver):
+    from jaxparam.optimize import problem
+
+    def f(s1, s2):
+        return s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2
+
+    def g(s1, s2):
+        return s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2
+
+    run = lambda e: jp.minimize(mesh, e, init=start, solver=solver, max_iters=2, verbose=False)
+    assert count_compiles(lambda: run(jp.energy(f))) > 0
+    n = problem.energy_value_and_grad._cache_size()
+    assert count_compiles(lambda: run(jp.energy(f))) == 0      # a fresh, equal energy
+    assert problem.energy_value_and_grad._cache_size() == n
+    assert count_compiles(lambda: run(jp.energy(g))) > 0       # another function: no collision
+    assert problem.energy_value_and_grad._cache_size() == n + 1
