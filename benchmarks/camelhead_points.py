@@ -41,8 +41,6 @@ def edge_set(F: np.ndarray) -> set:
 def interior_quads(F: np.ndarray) -> np.ndarray:
     """``(q, 4)`` rows ``(a, b, c, d)``: interior edge ``a-b`` with faces ``(a, b, c)`` and
     ``(b, a, d)``."""
-    from jaxparam import points as PT
-
     twin = half_edge_twins(F, int(F.max()) + 1)
     h = np.flatnonzero(twin > np.arange(twin.size))
     nxt = lambda x: x - x % 3 + (x + 1) % 3          # noqa: E731
@@ -100,7 +98,7 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=8, help="random samples per face (plus the centroid)")
     args = ap.parse_args()
     import jaxparam as jp
-    from jaxparam import points as PT
+    from jaxparam.points.triangulation import flip_towards_3d_delaunay
 
     P = jp.load_points(DATA / "points" / "camelhead.xyz")
     src = jp.load(DATA / "meshes" / "camelhead.off")
@@ -113,12 +111,12 @@ def main() -> int:
     t = time.perf_counter()
     rec = jp.reconstruct_surface(P)
     seconds = time.perf_counter() - t
-    F = np.asarray(rec.faces)
+    F = np.asarray(rec.mesh.faces)
     print(f"reconstruction: {seconds:.2f} s, {len(F)} faces, points used "
-          f"{rec.topology.referenced.mean():.4f}, disk {rec.topology.is_disk}, "
-          f"flips {jp.metrics.flips(rec, rec.uv)}")
+          f"{rec.points_used.size / len(P):.4f}, disk {rec.mesh.topology.is_disk}, "
+          f"flips {jp.metrics.flips(rec.mesh, rec.uv)}")
     true_b = set(point_of[src.topology.boundary].tolist())
-    found = set(np.asarray(rec.boundary_points).tolist())
+    found = set(rec.boundary.tolist())
     print(f"boundary detection: precision {len(found & true_b) / len(found):.2f}, "
           f"recall {len(found & true_b) / len(true_b):.2f}")
     try:
@@ -146,7 +144,7 @@ def main() -> int:
     none = ~np.any(np.stack(list(rules.values())), axis=0)
     print(f"  rejected by all six: {100 * none.mean():.1f} % of the interior edges")
     U = np.asarray(jp.convex_map(src, weights="harmonic"))
-    flipped = PT._flip_towards_3d_delaunay(SF, V, U, 1000)
+    flipped = flip_towards_3d_delaunay(SF, V, U, 1000)
     kept = edge_set(flipped) & edge_set(SF)
     print(f"camelhead.off flipped towards 3D Delaunay in its harmonic map keeps "
           f"{100 * len(kept) / len(edge_set(SF)):.1f} % of its edges")

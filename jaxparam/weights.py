@@ -3,7 +3,11 @@
 Each kind is computed for every entry ``(v, w)`` of an *interior* vertex's
 one-ring at once (no loop over vertices), in JAX, differentiable in the
 vertex positions.  The entries are those of :func:`ring_entries`: the
-topology's CSR one-rings restricted to interior rows, anticlockwise.
+topology's CSR one-rings restricted to interior rows, anticlockwise.  The same
+kinds (but ``harmonic``, which needs faces) are computed on the fans of a
+neighbour graph of unorganized points (survey §8): :func:`fan_entries`,
+:func:`fan_weights`.  Both go through one formula per kind,
+:func:`weights_from_angles`, given each entry's angle, previous angle and length.
 
 Two families:
 
@@ -29,12 +33,15 @@ from .errors import MeshError
 from .geometry import safe_norm
 
 __all__ = [
-    "KINDS", "SYMMETRIC_KINDS", "RingEntries", "ring_entries", "entry_weights", "convex_weights",
-    "normalize", "edge_values_to_entries",
+    "KINDS", "SYMMETRIC_KINDS", "FAN_KINDS", "RingEntries", "ring_entries", "entry_weights",
+    "convex_weights", "normalize", "edge_values_to_entries", "weights_from_angles",
+    "shape_preserving_weights", "loop_bound", "FanEntries", "fan_entries", "fan_weights",
 ]
 
 KINDS = ("uniform", "inverse_distance", "shape_preserving", "mean_value", "harmonic")
 SYMMETRIC_KINDS = ("uniform", "inverse_distance", "harmonic")
+#: The kinds defined on point fans (no faces, so no ``harmonic``).
+FAN_KINDS = ("uniform", "inverse_distance", "shape_preserving", "mean_value")
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,28 +107,50 @@ def _corner_geometry(V, F):
 def _weights_kernel(V, F, wedge, prev_wedge, row, row_start, row_end, degree, *, kind, n_rows,
                     max_degree):
     angle, cot, length = _corner_geometry(V, F)
-    r = length[wedge]                                   # |w_j - v|
-    if kind == "uniform":
-        return jnp.ones_like(r)
-    if kind == "inverse_distance":
-        return 1.0 / r
     if kind == "harmonic":
         # mu_vw = (cot alpha + cot beta) / 2 with alpha, beta opposite [v, w] (survey §5): in the
         # wedge's face the opposite corner is c + 2, in the previous wedge's face c + 1.
         nxt_face = wedge - wedge % 3 + (wedge + 2) % 3
         prv_face = prev_wedge - prev_wedge % 3 + (prev_wedge + 1) % 3
         return 0.5 * (cot[nxt_face] + cot[prv_face])
-    delta = angle[wedge]                                # ang(v_j, v, v_{j+1})
+    # angle[wedge] = ang(v_j, v, v_{j+1}), length[wedge] = |v_j - v|.
+    return weights_from_angles(kind, angle[wedge], angle[prev_wedge], length[wedge], row,
+                               row_start, row_end, degree, n_rows=n_rows, max_degree=max_degree)
+
+
+def weights_from_angles(kind: str, angle, prev_angle, length, row, row_start, row_end, degree, *,
+                        n_rows: int, max_degree: int):
+    """Weights of one of :data:`FAN_KINDS` on entries ``(v, w_j)`` of anticlockwise fans, from
+    the fans' angles and lengths: the one formula of each kind for mesh one-rings and point fans.
+
+    **Arguments** (``k`` entries, rows contiguous and in fan order): ``angle (k,)`` the angle
+    ``delta_j = ang(w_j, v, w_{j+1})`` at the centre; ``prev_angle (k,)`` the previous entry's,
+    ``delta_{j-1}``; ``length (k,)`` ``r_j = |w_j - v|``; ``row (k,)`` the row of each entry,
+    ``row_start (k,)``, ``row_end (k,)`` its entry range, ``degree (n_rows,)`` (these only for
+    ``shape_preserving``); ``n_rows``; ``max_degree`` a bound on the degree that is a power
+    of two (:func:`loop_bound`; ``shape_preserving`` only, else ignored).  JAX, traceable.
+
+    **Returns:** ``(k,)`` unnormalized weights: ``uniform`` 1, ``inverse_distance`` ``1 / r_j``,
+    ``mean_value`` Floater's ``(tan(delta_{j-1}/2) + tan(delta_j/2)) / r_j`` (2003),
+    ``shape_preserving`` :func:`shape_preserving_weights` (rows summing to 1).
+    """
+    if kind == "uniform":
+        return jnp.ones_like(length)
+    if kind == "inverse_distance":
+        return 1.0 / length
     if kind == "mean_value":
-        # Floater 2003: lambda_j ~ (tan(delta_{j-1}/2) + tan(delta_j/2)) / |v_j - v|.
-        return (jnp.tan(0.5 * angle[prev_wedge]) + jnp.tan(0.5 * delta)) / r
+        return (jnp.tan(0.5 * prev_angle) + jnp.tan(0.5 * angle)) / length
     if kind == "shape_preserving":
-        return _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_degree)
+        return shape_preserving_weights(angle, length, row, row_start, row_end, degree,
+                                        n_rows=n_rows, max_degree=max_degree)
     raise ValueError(kind)
 
 
-def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_degree):
+def shape_preserving_weights(delta, r, row, row_start, row_end, degree, *, n_rows: int,
+                             max_degree: int):
     """Floater's shape-preserving weights (survey §4, eq. (7)), all rows at once.
+
+    **Arguments:** as :func:`weights_from_angles`'s (``delta`` the angles, ``r`` the lengths).
 
     Step 1, the geodesic polar map: neighbour j goes to ``p_j = r_j (cos phi_j,
     sin phi_j)`` with ``phi`` the accumulated angles scaled by ``rho = 2 pi /
@@ -173,8 +202,10 @@ def _shape_preserving(delta, r, row, row_start, row_end, degree, n_rows, max_deg
     return lam / degree[row]
 
 
-def _bucket(d: int) -> int:
-    """Round a loop bound up to a power of two so similar meshes share compiled code."""
+def loop_bound(d: int) -> int:
+    """A loop bound ``>= d`` (at least 8) rounded up to a power of two, so that meshes and
+    point sets of similar degrees share compiled code (``max_degree`` of
+    :func:`shape_preserving_weights`)."""
     return 1 << max(3, (d - 1).bit_length())
 
 
@@ -193,7 +224,7 @@ def entry_weights(vertices, topology, kind: str):
     V = jnp.asarray(vertices, dtype=jnp.float64)
     w = _weights_kernel(V, topology.faces, R.wedge, R.prev_wedge, R.row, R.row_start, R.row_end,
                         R.degree, kind=kind, n_rows=R.n_rows,
-                        max_degree=_bucket(int(R.degree.max())) if kind == "shape_preserving" else 0)
+                        max_degree=loop_bound(int(R.degree.max())) if kind == "shape_preserving" else 0)
     return w, kind in SYMMETRIC_KINDS
 
 
@@ -237,3 +268,89 @@ def edge_values_to_entries(edge_values, topology):
         raise MeshError(f"weights: edge weights must have shape ({E.shape[0]},), one per edge "
                         f"of mesh.topology.edges, got {tuple(ev.shape)}.")
     return ev[pos]
+
+
+# ------------------------------------------------------------------------------------------
+# Point fans (survey §8)
+# ------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class FanEntries:
+    """The fan entries of the free points of a neighbour graph, as flat numpy arrays.
+
+    The counterpart of :class:`RingEntries` for unorganized points: a fan is a point's
+    neighbours in anticlockwise order (a CSR row of a
+    :class:`~jaxparam.points.PointGraph`), cyclic, with no faces.
+
+    **Fields** (``k`` entries, ``n_rows`` free points): ``free (n_rows,)`` the free points in
+    increasing order (row ``r`` is point ``free[r]``); ``row (k,)`` the row of each entry's
+    centre; ``center``, ``nbr``, ``prev``, ``next`` ``(k,)`` point indices (the centre, the
+    neighbour, and the fan neighbours before and after it, cyclically); ``row_start (k,)``,
+    ``row_end (k,)`` the entry range of the row; ``degree (n_rows,)``; ``n_rows``.
+    """
+
+    free: np.ndarray
+    row: np.ndarray
+    center: np.ndarray
+    nbr: np.ndarray
+    prev: np.ndarray
+    next: np.ndarray
+    row_start: np.ndarray
+    row_end: np.ndarray
+    degree: np.ndarray
+    n_rows: int
+
+
+def fan_entries(indptr: np.ndarray, indices: np.ndarray, fixed: np.ndarray) -> FanEntries:
+    """The entries of the fans ``(indptr (N+1,), indices)`` (CSR rows in fan order, at least
+    two entries each) whose centre is not ``fixed (N,) bool``."""
+    N = indptr.size - 1
+    free = np.flatnonzero(~fixed)
+    slot = np.full(N, -1, np.int64)
+    slot[free] = np.arange(free.size)
+    rows_all = np.repeat(np.arange(N), np.diff(indptr))
+    ent = np.flatnonzero(~fixed[rows_all])
+    center = rows_all[ent]
+    # The entry after / before each one in its (cyclic) fan: the next / previous entry, but
+    # the first / last of the row at its ends.
+    nxt_all = np.arange(1, indices.size + 1)
+    nxt_all[indptr[1:] - 1] = indptr[:-1]
+    prv_all = np.arange(-1, indices.size - 1)
+    prv_all[indptr[:-1]] = indptr[1:] - 1
+    row = slot[center]
+    degree = np.bincount(row, minlength=free.size)
+    starts = np.zeros(free.size + 1, np.int64)
+    np.cumsum(degree, out=starts[1:])
+    return FanEntries(free=free, row=row, center=center, nbr=indices[ent],
+                      prev=indices[prv_all[ent]], next=indices[nxt_all[ent]],
+                      row_start=starts[row], row_end=starts[row + 1], degree=degree,
+                      n_rows=int(free.size))
+
+
+def fan_weights(points, entries: FanEntries, kind: str):
+    """Unnormalized weights of one of :data:`FAN_KINDS` on fan entries, from 3D angles and
+    lengths (differentiable in ``points (N, 3)``, which may be traced).
+
+    **Returns:** ``(k,)`` in ``entries`` order (rows need not sum to 1).
+    """
+    if kind not in FAN_KINDS:
+        raise MeshError(f"weights: unknown fan weights {kind!r}; use one of {FAN_KINDS}.")
+    E = entries
+    P = points if isinstance(points, jax.core.Tracer) else jnp.asarray(points, dtype=jnp.float64)
+    return _fan_kernel(P, E.center, E.nbr, E.next, E.prev, E.row, E.row_start, E.row_end, E.degree,
+                       kind=kind, n_rows=E.n_rows,
+                       max_degree=loop_bound(int(E.degree.max())) if kind == "shape_preserving" else 0)
+
+
+def _angle(a, b):
+    return jnp.arctan2(safe_norm(jnp.cross(a, b)), jnp.sum(a * b, -1))
+
+
+@functools.partial(jax.jit, static_argnames=("kind", "n_rows", "max_degree"))
+def _fan_kernel(P, center, nbr, nxt, prev, row, row_start, row_end, degree, *, kind, n_rows,
+                max_degree):
+    x = P[center]
+    d = P[nbr] - x
+    return weights_from_angles(kind, _angle(d, P[nxt] - x), _angle(P[prev] - x, d), safe_norm(d),
+                               row, row_start, row_end, degree, n_rows=n_rows,
+                               max_degree=max_degree)

@@ -8,6 +8,8 @@ from scipy.spatial import cKDTree
 
 import jaxparam as jp
 from jaxparam import points as PT
+from jaxparam import weights as wts
+from jaxparam.points.triangulation import delaunay, flip_towards_3d_delaunay, peel_ears
 from jaxparam.triangles import orient
 from jaxparam.errors import MeshFileError, PointCloudError
 from conftest import data_path
@@ -26,13 +28,13 @@ def test_weights_positive_and_sum_to_one(surface_points, kind):
     P, _, _ = surface_points
     g = PT.point_graph(P, 10)
     bnd = PT.detect_boundary(P, g)
-    S = PT._system(g, bnd, len(P))
-    w = np.asarray(PT._fan_weights(jnp.asarray(P), S.center, S.nbr, S.nxt, S.prev, S.rows_e,
-                                   S.row_start, S.row_end, S.degree, kind=kind, n_rows=S.n_rows,
-                                   max_degree=32))
+    fixed = np.zeros(len(P), bool)
+    fixed[bnd] = True
+    E = wts.fan_entries(g.indptr, g.indices, fixed)
+    w = np.asarray(wts.fan_weights(jnp.asarray(P), E, kind))
     assert w.min() > 0
-    lam = w / np.bincount(S.rows_e, weights=w)[S.rows_e]
-    np.testing.assert_allclose(np.bincount(S.rows_e, weights=lam), 1.0, atol=1e-12)
+    lam = w / np.bincount(E.row, weights=w)[E.row]
+    np.testing.assert_allclose(np.bincount(E.row, weights=lam), 1.0, atol=1e-12)
 
 
 def test_boundary_detection_precision_recall(surface_points):
@@ -48,17 +50,17 @@ def test_boundary_detection_precision_recall(surface_points):
 def test_map_is_one_to_one_reconstruction_recovers_edges(surface_points):
     P, perm, mesh = surface_points
     rec = jp.reconstruct_surface(P)
-    assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
-    used = rec.topology.referenced.mean()
+    assert rec.mesh.topology.is_disk and jp.distortion(rec.mesh, rec.uv).flips == 0
+    used = rec.mesh.topology.referenced.mean()
     assert used >= 0.98
     E0 = {tuple(e) for e in np.sort(np.argsort(perm)[mesh.topology.edges], 1).tolist()}
-    E1 = {tuple(e) for e in rec.topology.edges.tolist()}
+    E1 = {tuple(e) for e in rec.mesh.topology.edges.tolist()}
     # Measured 77 %: Delaunay of the meshless UVs flips some of the source mesh's diagonals.
     assert len(E0 & E1) / len(E0) >= 0.75
     # Every reconstructed face lies on the source surface: within 1% of the diagonal.
     src = mesh
     from scipy.spatial import cKDTree
-    cent = np.asarray(rec.vertices)[rec.faces].mean(1)
+    cent = np.asarray(rec.mesh.vertices)[rec.mesh.faces].mean(1)
     dense = jp.shapes.refine(src, 2)
     d, _ = cKDTree(np.asarray(dense.vertices)).query(cent)
     diag = np.linalg.norm(np.ptp(P, axis=0))
@@ -70,7 +72,7 @@ def test_noisy_points_still_one_to_one():
     P = np.asarray(mesh.vertices) + np.random.default_rng(2).normal(0, 0.002, (mesh.n_vertices, 3))
     uv, bnd = jp.meshless_map(P, weights="shape_preserving")
     rec = jp.reconstruct_surface(P)
-    assert jp.distortion(rec, rec.uv).flips == 0
+    assert jp.distortion(rec.mesh, rec.uv).flips == 0
 
 
 @pytest.mark.parametrize("kind, rtol", [("inverse_distance", 1e-6), ("mean_value", 1e-4)])
@@ -109,7 +111,8 @@ def test_point_errors(tmp_path):
     with pytest.raises(PointCloudError, match="unknown weights"):
         jp.meshless_map(P, weights="cot")
     uv, bnd = jp.meshless_map(np.vstack([P, P[:2]]), merge_duplicates=True)
-    assert uv.shape == (50, 2)
+    assert uv.shape == (52, 2)            # input numbering: a copy gets its first point's UV
+    np.testing.assert_array_equal(np.asarray(uv)[50:], np.asarray(uv)[:2])
     with pytest.raises(PointCloudError, match=r"points 50, 51 .*point 50 equals point 7"):
         jp.meshless_map(np.vstack([P, P[[7, 7]]]))
     with pytest.raises(PointCloudError, match="boundary must be 'circle' or 'square'"):
@@ -168,15 +171,15 @@ def test_cli_meshless_and_fit(tmp_path, surface_points):
 def test_bump_domain_half_points():
     P = jp.load_points(data_path("points", "bump-domain-half.xyz"))
     rec = jp.reconstruct_surface(P)
-    assert jp.distortion(rec, rec.uv).flips == 0
+    assert jp.distortion(rec.mesh, rec.uv).flips == 0
     # Measured: 72 % of the points end up in the disk (the rest are peeled off with bridging
     # triangles); issue 4 keeps this open.
-    assert rec.topology.referenced.mean() > 0.7
+    assert rec.mesh.topology.referenced.mean() > 0.7
 
 
 def _non_delaunay_3d(F, P, U):
     """Interior edges that the 3D flip pass would still flip (excess angle, UVs kept valid)."""
-    again = PT._flip_towards_3d_delaunay(F, P, U, 1)
+    again = flip_towards_3d_delaunay(F, P, U, 1)
     return int(np.any(again != F, axis=1).sum())
 
 
@@ -189,9 +192,9 @@ def test_3d_flips_keep_a_one_to_one_triangulation_and_bring_faces_to_the_surface
     rec0 = jp.reconstruct_surface(P, flip_rounds=0)
     rec = jp.reconstruct_surface(P)
     U = np.asarray(rec.uv)
-    assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
-    F0 = PT._delaunay(U)
-    F1 = PT._flip_towards_3d_delaunay(F0, P, U, 100)
+    assert rec.mesh.topology.is_disk and jp.distortion(rec.mesh, rec.uv).flips == 0
+    F0 = delaunay(U)
+    F1 = flip_towards_3d_delaunay(F0, P, U, 100)
     assert len(F1) == len(F0) and orient(U, *F1.T).min() > 0
     assert jp.TriMesh(P, F1).topology.is_disk
     assert _non_delaunay_3d(F0, P, U) > 0 and _non_delaunay_3d(F1, P, U) == 0
@@ -200,15 +203,15 @@ def test_3d_flips_keep_a_one_to_one_triangulation_and_bring_faces_to_the_surface
         X = np.asarray(m.vertices)[m.faces]
         S = np.concatenate([X.mean(1), (X[:, 0] + X[:, 1]) / 2, (X[:, 1] + X[:, 2]) / 2, (X[:, 2] + X[:, 0]) / 2])
         return np.abs(1 - np.hypot(S[:, 0], S[:, 2])).max()
-    assert worst(rec) < worst(rec0)
+    assert worst(rec.mesh) < worst(rec0.mesh)
 
 
 def test_delaunay_fallback_without_triangle_matches(monkeypatch):
     import sys
     U = np.random.default_rng(5).random((400, 2))
-    F = PT._delaunay(U)
+    F = delaunay(U)
     monkeypatch.setitem(sys.modules, "triangle", None)          # import triangle -> ImportError
-    G = PT._delaunay(U)
+    G = delaunay(U)
     key = lambda T: {tuple(sorted(f)) for f in T.tolist()}
     assert key(F) == key(G) and orient(U, *G.T).min() > 0
 
@@ -254,8 +257,9 @@ def test_steep_neighbour_pairs_across_a_thin_fold_are_dropped():
     d = P[g.indices] - P[rows]
     slope = np.maximum(np.abs(np.sum(d * g.normal[rows], 1)), np.abs(np.sum(d * g.normal[g.indices], 1)))
     slope /= np.linalg.norm(d, axis=1)
-    weak = np.bincount(rows[slope <= 0.6], minlength=len(P)) < 3     # kept all their pairs
-    assert np.all((slope <= 0.6) | weak[rows] | weak[g.indices])
+    ok = slope <= PT.defaults.MAX_SLOPE
+    weak = np.bincount(rows[ok], minlength=len(P)) < 3     # kept all their pairs
+    assert np.all(ok | weak[rows] | weak[g.indices])
     # Symmetric still.
     pairs = set(zip(rows.tolist(), g.indices.tolist()))
     assert all((w, v) in pairs for v, w in pairs)
@@ -274,7 +278,7 @@ def test_camelhead_points_dropping_steep_pairs_brings_faces_to_the_surface():
     diag = np.linalg.norm(np.ptp(V, axis=0))
 
     def distances(rec):
-        X = P[rec.faces]
+        X = P[rec.mesh.faces]
         S = np.concatenate([X.mean(1), (X[:, 0] + X[:, 1]) / 2, (X[:, 1] + X[:, 2]) / 2,
                             (X[:, 2] + X[:, 0]) / 2])
         d2 = igl.point_mesh_squared_distance(S, V, src.faces)[0]
@@ -284,7 +288,7 @@ def test_camelhead_points_dropping_steep_pairs_brings_faces_to_the_surface():
     rec = jp.reconstruct_surface(P)
     rms, mx = distances(rec)
     assert rms < 0.9 * rms1 and mx <= max1 * (1 + 1e-9)
-    assert rec.topology.is_disk and jp.distortion(rec, rec.uv).flips == 0
+    assert rec.mesh.topology.is_disk and jp.distortion(rec.mesh, rec.uv).flips == 0
 
 
 def test_an_ear_over_a_missed_boundary_point_is_peeled():
@@ -295,9 +299,48 @@ def test_an_ear_over_a_missed_boundary_point_is_peeled():
     apex = int(np.flatnonzero(np.all(np.isclose(xy, [0.5, 1.0]), axis=1))[0])
     xy[apex] = [0.5, 0.98]
     P = np.column_stack([xy, 0.1 * np.sin(3 * xy[:, 0])])
-    F = PT._delaunay(xy)
-    G = PT._peel_ears(F, P, PT.point_graph(P, 10))
+    F = delaunay(xy)
+    G = peel_ears(F, P, PT.point_graph(P, 10))
     gone = {tuple(f) for f in np.sort(F, 1).tolist()} - {tuple(f) for f in np.sort(G, 1).tolist()}
     assert len(gone) == 1 and apex in next(iter(gone))
     t = jp.TriMesh(P, G).topology
     assert t.is_disk and apex in t.boundary_loops[0]
+
+
+def test_a_user_boundary_survives_merging_duplicates(surface_points):
+    """With merge_duplicates, boundary_indices (input numbering) are used, not re-detected;
+    uv and the returned boundary are both in the input's numbering."""
+    P, perm, mesh = surface_points
+    bnd_in = np.argsort(perm)[mesh.topology.boundary_loops[0]]   # the true boundary, as indices into P
+    copies = np.array([int(bnd_in[0]), 5, 17])
+    Q = np.vstack([P, P[copies]])                                # points N, N+1, N+2 repeat earlier ones
+    n = len(P)
+    # The user names one boundary point by its later copy.
+    user = bnd_in.copy()
+    user[0] = n
+    uv, bnd = jp.meshless_map(Q, boundary_indices=user, merge_duplicates=True)
+    ref_uv, ref_bnd = jp.meshless_map(P, boundary_indices=bnd_in)
+    assert uv.shape == (n + 3, 2)
+    np.testing.assert_array_equal(bnd, bnd_in)                  # the copy is named by its first point
+    np.testing.assert_allclose(np.asarray(uv)[:n], np.asarray(ref_uv), atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(uv)[n:], np.asarray(uv)[copies])
+    # The same for the reconstruction: the mesh spans all input points, copies unused.
+    rec = jp.reconstruct_surface(Q, boundary_indices=user, merge_duplicates=True)
+    np.testing.assert_array_equal(rec.boundary, bnd_in)
+    assert rec.mesh.n_vertices == n + 3 and not rec.mesh.topology.referenced[n:].any()
+    with pytest.raises(PointCloudError, match="once duplicates are merged"):
+        jp.meshless_map(Q, boundary_indices=[int(bnd_in[0]), 1, n], merge_duplicates=True)
+
+
+def test_reconstruction_fields_agree(surface_points):
+    P, _, _ = surface_points
+    rec = jp.reconstruct_surface(P)
+    assert isinstance(rec, PT.Reconstruction)
+    assert rec.mesh.uv is rec.uv and rec.uv.shape == (len(P), 2)
+    np.testing.assert_array_equal(rec.points_used, np.unique(rec.mesh.faces))
+    assert set(rec.seconds) == {"neighbours", "boundary", "weights_and_solve", "delaunay", "flips",
+                                "peel_and_topology"}
+    # The same polygon as the meshless map's (detected in Morton order: maybe from another start).
+    uv, bnd = jp.meshless_map(P, weights="shape_preserving")
+    assert rec.boundary.tolist() in [np.roll(bnd, s).tolist() for s in range(bnd.size)]
+    assert np.all(rec.mesh.topology.is_boundary[rec.boundary] | ~rec.mesh.topology.referenced[rec.boundary])

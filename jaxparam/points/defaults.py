@@ -1,0 +1,32 @@
+"""The default settings of the point pipeline, each named once.
+
+:func:`~jaxparam.points.point_graph`, :func:`~jaxparam.points.detect_boundary`,
+:func:`~jaxparam.points.meshless_map` and :func:`~jaxparam.points.reconstruct_surface` take
+their defaults from here, so that changing one changes it everywhere.
+"""
+from __future__ import annotations
+
+import math
+
+__all__ = ["K", "K_DETECT", "GAP", "MAX_SLOPE", "BRIDGE_FACTOR", "FLIP_ROUNDS"]
+
+#: Nearest neighbours per point in the map's fans (survey §8's ``k``).
+K = 10
+
+#: Nearest neighbours whose angular gap decides whether a point is on the boundary: more than
+#: the map's ``K``, since random samplings leave wide gaps in small neighbourhoods.
+K_DETECT = 24
+
+#: Angular gap (radians) above which a point is a boundary candidate: ``0.7 pi``.
+GAP = 0.7 * math.pi
+
+#: Largest ``|n . d| / |d|`` of a neighbour pair ``d`` against either point's normal ``n``
+#: (about 37 degrees): steeper pairs join the two sides of parts thinner than the spacing.
+MAX_SLOPE = 0.6
+
+#: A hull face of the reconstruction whose longest 3D edge exceeds this many local point
+#: spacings bridges a concave part of the boundary and is peeled off.
+BRIDGE_FACTOR = 3.0
+
+#: Most rounds of independent 3D Delaunay edge flips in the reconstruction.
+FLIP_ROUNDS = 100

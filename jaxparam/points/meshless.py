@@ -1,0 +1,227 @@
+"""The meshless parameterization of unorganized points (survey §8): checks, the fans' weights,
+the boundary map and eq. (4), solved as for meshes (:mod:`jaxparam.combination`)."""
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order
+
+from .. import boundary as bmap
+from .. import combination as comb
+from .. import weights as wts
+from ..errors import PointCloudError, first_few
+from .boundary import detect_boundary
+from .defaults import GAP, K, MAX_SLOPE
+from .graph import PointGraph, morton_keys, point_graph
+
+__all__ = ["WEIGHTS", "check_points", "check_map_options", "check_boundary_indices",
+           "meshless_map", "map_points", "symmetric_solve"]
+
+#: The weights of the meshless map (those of :mod:`jaxparam.weights` defined on point fans).
+WEIGHTS = wts.FAN_KINDS
+
+
+def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_index: bool = False):
+    """Validate a point set; returns ``(points (M, 3), kept (M,))``, ``kept`` the input
+    indices of the rows of ``points``, in increasing order; with ``return_index`` also
+    ``index (N,)``, the row of ``points`` that holds each input point.
+
+    Raises :class:`PointCloudError` for a wrong shape, non-finite coordinates,
+    too few points, ``k >= M``, duplicates (unless ``merge_duplicates``: then
+    the later copies are dropped, ``kept`` says which points remain and ``index`` maps a
+    copy to its first occurrence) and point sets that are collinear or coincident.
+    """
+    P = np.asarray(points, np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise PointCloudError(f"meshless_map: points must have shape (N, 3), got {P.shape}.")
+    bad = np.flatnonzero(~np.all(np.isfinite(P), axis=1))
+    if bad.size:
+        raise PointCloudError(f"meshless_map: points {first_few(bad)} have non-finite coordinates; "
+                              "remove them.")
+    n_in = P.shape[0]
+    kept = np.arange(n_in)
+    index = np.arange(n_in)
+    # Equal points share a Morton key: only points whose key repeats need the exact (and, over
+    # all points, 3x slower) row-wise np.unique.
+    codes = morton_keys(P)
+    key = np.sort(codes)
+    rep = key[1:][key[1:] == key[:-1]]
+    maybe = np.flatnonzero(np.isin(codes, rep)) if rep.size else np.zeros(0, np.int64)
+    dup = np.zeros(0, np.int64)
+    if maybe.size:
+        _, first, inv = np.unique(P[maybe], axis=0, return_index=True, return_inverse=True)
+        first = maybe[first][inv.reshape(-1)]             # each point's first equal point
+        dup = maybe[first != maybe]
+    if dup.size:
+        if not merge_duplicates:
+            raise PointCloudError(
+                f"meshless_map: points {first_few(dup)} duplicate earlier points (point {int(dup[0])} "
+                f"equals point {int(first[maybe == dup[0]][0])}); remove them or pass "
+                "merge_duplicates=True.")
+        kept = np.setdiff1d(kept, dup)
+        P = P[kept]
+        index[maybe] = first
+        index = np.searchsorted(kept, index)
+    if P.shape[0] < 4:
+        raise PointCloudError(f"meshless_map: {P.shape[0]} points are too few; at least 4 are needed.")
+    if k >= P.shape[0]:
+        raise PointCloudError(f"meshless_map: k = {k} neighbours needs more than {k} points, "
+                              f"got {P.shape[0]}; lower k.")
+    s = np.linalg.svd(P - P.mean(0), compute_uv=False)
+    if s[0] == 0 or s[1] <= 1e-9 * s[0]:
+        what = "coincident" if s[0] == 0 else "collinear"
+        raise PointCloudError(f"meshless_map: the points are {what}; a surface needs points "
+                              "spread in two directions.")
+    return (P, kept, index) if return_index else (P, kept)
+
+
+def check_map_options(where: str, weights, boundary, spacing) -> None:
+    """Raise :class:`PointCloudError` (naming ``where``) unless ``weights`` is one of
+    :data:`WEIGHTS`, ``boundary`` ``"circle"`` or ``"square"`` and ``spacing`` one of
+    :data:`jaxparam.boundary.SPACINGS`."""
+    if weights not in WEIGHTS:
+        raise PointCloudError(f"{where}: unknown weights {weights!r}; use one of {WEIGHTS}.")
+    if not isinstance(boundary, str) or boundary not in ("circle", "square"):
+        raise PointCloudError(f"{where}: boundary must be 'circle' or 'square', got {boundary!r}; "
+                              "to choose the boundary points pass boundary_indices.")
+    if spacing not in bmap.SPACINGS:
+        raise PointCloudError(f"{where}: unknown spacing {spacing!r}; use one of {bmap.SPACINGS}.")
+
+
+def check_boundary_indices(where: str, indices, n: int, index: np.ndarray | None = None) -> np.ndarray:
+    """User boundary indices into ``n`` input points as ``(b,) int64``, or a
+    :class:`PointCloudError`.
+
+    With ``index (n,)`` (from :func:`check_points` after merging duplicates) they are
+    renamed to the merged points: copies of one point listed next to each other count once.
+    """
+    bnd = np.asarray(indices, np.int64)
+    if bnd.ndim != 1 or bnd.size < 3 or bnd.min() < 0 or bnd.max() >= n or np.unique(bnd).size != bnd.size:
+        raise PointCloudError(f"{where}: boundary_indices must be >= 3 distinct point indices "
+                              f"in [0, {n}), in order; got {bnd.size} values.")
+    if index is None:
+        return bnd
+    merged = index[bnd]
+    merged = merged[merged != np.roll(merged, 1)]        # neighbouring copies of one point
+    if merged.size < 3 or np.unique(merged).size != merged.size:
+        raise PointCloudError(f"{where}: boundary_indices name {np.unique(merged).size} distinct "
+                              "points once duplicates are merged; a boundary needs >= 3, each "
+                              "once, in order.")
+    return merged
+
+
+def symmetric_solve(weights: str, symmetric: bool, radius) -> bool:
+    """Whether the meshless system is symmetric (a Cholesky solve): spring weights on a
+    symmetric kNN graph."""
+    return weights in ("uniform", "inverse_distance") and symmetric and radius is None
+
+
+def meshless_map(points, *, k: int = K, weights: str = "inverse_distance", boundary="circle",
+                 spacing: str = "chord", boundary_indices=None, radius: float | None = None,
+                 symmetric: bool = True, gap: float = GAP, graph: PointGraph | None = None,
+                 merge_duplicates: bool = False, max_slope: float = MAX_SLOPE):
+    """Meshless parameterization of unorganized points (survey §8).
+
+    **Arguments:** ``points: (N, 3)`` (numpy, JAX or a tracer with ``graph`` given);
+    ``k`` neighbours (or ``radius``); ``weights`` one of :data:`WEIGHTS` (the unsymmetric
+    ``shape_preserving`` and ``mean_value`` are normalized to eq. (3)'s ``lambda`` as in
+    :func:`jaxparam.convex_map`); ``boundary`` ``"circle"`` or ``"square"``;
+    ``boundary_indices`` the ordered boundary points (input indices; default: detected);
+    ``graph`` a precomputed :func:`~jaxparam.points.point_graph` (needed under
+    ``jax.grad``: neighbourhoods are topology, computed from concrete points; with
+    ``merge_duplicates`` it must describe the merged points of :func:`check_points`);
+    ``max_slope`` drops neighbour pairs that leave the tangent planes steeply (see
+    :func:`~jaxparam.points.point_graph`); ``merge_duplicates`` maps repeated points once.
+
+    **Returns:** ``(uv (N, 2), boundary (b,) int)``, both in the input's numbering: ``uv[i]``
+    belongs to ``points[i]`` (a merged copy gets the UV of the point it repeats), and
+    ``boundary`` lists input indices (the first copy of a merged point).
+
+    Differentiable in the points: ``jax.grad`` flows through the weights,
+    the boundary map and the sparse solve.
+
+    Example::
+
+        uv, bnd = jp.meshless_map(points, k=10, weights="inverse_distance")
+    """
+    check_map_options("meshless_map", weights, boundary, spacing)
+    sym = symmetric_solve(weights, symmetric, radius)
+    if isinstance(points, jax.core.Tracer):
+        if graph is None or boundary_indices is None:
+            raise PointCloudError("meshless_map: under jax.grad/jit pass graph=jp.points.point_graph("
+                                  "concrete_points) and boundary_indices=... computed from concrete points.")
+        bnd = check_boundary_indices("meshless_map", boundary_indices, points.shape[0])
+        return map_points(points, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
+                          symmetric=sym), bnd
+    n_in = np.shape(points)[0] if np.ndim(points) == 2 else 0
+    Pc, kept, index = check_points(points, k=k, merge_duplicates=merge_duplicates, return_index=True)
+    merged = kept.size != n_in
+    if graph is None:
+        graph = point_graph(Pc, k, radius=radius, symmetric=symmetric, max_slope=max_slope)
+    elif graph.n_points != Pc.shape[0]:
+        raise PointCloudError(f"meshless_map: graph has {graph.n_points} points, the points "
+                              f"{Pc.shape[0]}" + (" once duplicates are merged" if merged else "")
+                              + "; build it with jp.points.point_graph of those points.")
+    if boundary_indices is None:
+        bnd = detect_boundary(Pc, graph, gap=gap)
+    else:
+        bnd = check_boundary_indices("meshless_map", boundary_indices, n_in,
+                                     index if merged else None)
+    if merged:
+        uv = map_points(Pc, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
+                        symmetric=sym)
+        return uv[index], kept[bnd]
+    P = points if isinstance(points, jax.Array) else Pc
+    return map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
+                      symmetric=sym), bnd
+
+
+def _check_solvable(E: wts.FanEntries, N: int, boundary: np.ndarray) -> None:
+    """Every interior point must reach a boundary point along G (end of §8)."""
+    src = E.free[E.row]
+    G = sp.csr_matrix((np.ones(src.size), (E.nbr, src)), shape=(N + 1, N + 1))   # reversed edges
+    G = G + sp.csr_matrix((np.ones(boundary.size), (np.full(boundary.size, N), boundary)),
+                          shape=(N + 1, N + 1))
+    reached = breadth_first_order(G, N, directed=True, return_predecessors=False)
+    ok = np.zeros(N + 1, bool)
+    ok[reached] = True
+    bad = E.free[~ok[E.free]]
+    if bad.size:
+        raise PointCloudError(
+            f"meshless_map: {bad.size} points cannot reach the boundary through their neighbours "
+            f"(e.g. point {int(bad[0])}); the system (3) would be singular: increase k, use "
+            "symmetric neighbourhoods, or remove the isolated cluster.")
+
+
+def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary: str, spacing: str,
+               symmetric: bool):
+    """The meshless map of checked points ``P (N, 3)`` (array or tracer) with their graph and
+    boundary polygon ``bnd`` (indices into ``P``): fan weights, boundary map, eq. (4) and its
+    sparse solve (``symmetric``: Cholesky).  **Returns:** ``(N, 2)`` UVs."""
+    N = P.shape[0]
+    fixed = np.zeros(N, bool)
+    fixed[bnd] = True
+    E = wts.fan_entries(graph.indptr, graph.indices, fixed)
+    _check_solvable(E, N, bnd)
+    slot = np.full(N, -1, np.int64)
+    slot[E.free] = np.arange(E.n_rows)
+    bslot = np.full(N, -1, np.int64)
+    bslot[bnd] = np.arange(bnd.size)
+    system = comb.combination_system(E.row, slot[E.nbr], bslot[E.nbr], E.n_rows)
+    Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
+    w = wts.fan_weights(Pj, E, weights)
+    uv_b = _boundary_map(Pj, jnp.asarray(bnd), boundary=boundary, spacing=spacing)
+    vals, rhs = comb.assemble(system, w, uv_b, normalize=comb.normalizes(weights))
+    x = comb.solve(system, vals, rhs, symmetric=symmetric)
+    return comb.scatter(x, uv_b, jnp.asarray(E.free), jnp.asarray(bnd), n=N)
+
+
+# One compiled kernel instead of a dozen eager operations (each compiled on its own for every
+# new point count).
+@functools.partial(jax.jit, static_argnames=("boundary", "spacing"))
+def _boundary_map(P, bnd, *, boundary, spacing):
+    return bmap.boundary_uv(P[bnd], boundary, spacing=spacing)

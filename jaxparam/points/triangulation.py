@@ -1,0 +1,222 @@
+"""The triangulation steps of :func:`~jaxparam.points.reconstruct_surface`: Delaunay in the
+parameter plane, flips towards 3D Delaunay, peeling of bridges and ears, and the largest
+manifold disk.  Numpy on concrete arrays; faces ``(m, 3) int64``, anticlockwise in the plane."""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order
+from scipy.spatial import Delaunay
+
+from .. import topology as topo
+from ..errors import PointCloudError
+from ..topology import half_edge_twins
+from ..triangles import corner_angle, face_angles, orient
+from .graph import PointGraph
+
+__all__ = ["delaunay", "flip_towards_3d_delaunay", "outside_bridges", "peel_ears",
+           "largest_manifold_disk"]
+
+
+def delaunay(U: np.ndarray) -> np.ndarray:
+    """Delaunay triangles ``(m, 3)`` of planar points ``(N, 2)``, anticlockwise, no zero-area
+    ones.  Shewchuk's Triangle (the optional ``triangle`` package: 1M points in about 1 s)
+    when it is installed, else SciPy's Qhull (about 13 s for 1M points)."""
+    try:
+        import triangle
+    except ImportError:
+        triangle = None
+    if triangle is not None:
+        F = np.asarray(triangle.triangulate({"vertices": np.array(U, np.float64)}, "Qz")["triangles"], np.int64)
+    else:
+        F = Delaunay(U).simplices.astype(np.int64)
+    cross = orient(U, F[:, 0], F[:, 1], F[:, 2])
+    F[cross < 0] = F[cross < 0][:, [0, 2, 1]]
+    return F[cross != 0]
+
+
+def _nxt(h):
+    """The next half-edge of the same face (``h = 3 f + j``)."""
+    return h - h % 3 + (h + 1) % 3
+
+
+def _prv(h):
+    """The previous half-edge of the same face."""
+    return h - h % 3 + (h + 2) % 3
+
+
+def flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int) -> np.ndarray:
+    """Flip interior edges ``a-b`` (faces ``(a, b, c)``, ``(b, a, d)``) whose opposite 3D angles
+    at ``c`` and ``d`` sum to more than pi, and to more than the new diagonal's, into
+    ``(a, d, c)``, ``(d, b, c)``, when both new faces keep a positive parameter-plane area.
+    The planar embedding is kept, so the result still triangulates the same points one-to-one
+    in the plane.
+
+    **Arguments:** ``F (m, 3)`` a manifold triangulation, anticlockwise in ``U (N, 2)``;
+    ``P (N, 3)`` the points in 3D; at most ``rounds`` rounds.  **Returns:** the new
+    ``(m, 3)`` faces (a copy; face ``f`` of a flipped pair stays at row ``f``).
+
+    Half-edge ``h = 3 f + j`` runs from ``F[f, j]`` to ``F[f, j+1]``; ``twin`` is kept up to
+    date through the flips, so after the first round only the edges of flipped faces (and
+    candidates that lost a conflict) are looked at again.  Each round flips an independent set:
+    a flip claims its two faces and their (up to four) neighbours, the largest excess angle
+    first, so no two flips of a round touch the same twins."""
+    F = np.array(F, np.int64)
+    m = len(F)
+    Ff = F.reshape(-1)                      # a view: writes to F show here
+    twin = half_edge_twins(F, len(P))
+    cand = np.flatnonzero(twin > np.arange(3 * m))
+    angles = face_angles(P, F).reshape(-1)             # angles[h]: at corner h % 3 of face h // 3
+    nxt, prv = _nxt, _prv
+    for _ in range(rounds):
+        cand = cand[twin[cand] >= 0]
+        h1 = np.sort(np.minimum(cand, twin[cand]))
+        h1 = h1[np.concatenate([[True], h1[1:] != h1[:-1]])]
+        excess = angles[prv(h1)] + angles[prv(twin[h1])] - np.pi
+        over = np.flatnonzero(excess > 1e-9)
+        h1, excess = h1[over], excess[over]
+        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(twin[h1])]
+        after = corner_angle(P, a, c, d) + corner_angle(P, b, c, d) - np.pi
+        scale = np.sum((U[a] - U[b]) ** 2, axis=1) + np.sum((U[c] - U[d]) ** 2, axis=1)
+        ok = ((after < excess - 1e-12) & (orient(U, a, d, c) > 1e-12 * scale)
+              & (orient(U, d, b, c) > 1e-12 * scale))
+        if not ok.any():
+            break
+        h1, pr = h1[ok], excess[ok]
+        h2 = twin[h1]
+        outer = twin[np.stack([nxt(h1), prv(h1), nxt(h2), prv(h2)], 1)]   # b-c, c-a, a-d, d-b
+        claims = np.concatenate([np.stack([h1 // 3, h2 // 3], 1), np.where(outer >= 0, outer // 3, -1)], 1)
+        valid = claims >= 0
+        fe = claims[valid]
+        ee = np.broadcast_to(np.arange(h1.size)[:, None], claims.shape)[valid]
+        best = np.full(m, -np.inf)
+        np.maximum.at(best, fe, pr[ee])
+        win = np.ones(h1.size, bool)
+        np.logical_and.at(win, ee, pr[ee] == best[fe])
+        # Equal excesses can leave two winners on one face: the lowest candidate keeps it.
+        first = np.full(m, h1.size)
+        np.minimum.at(first, fe[win[ee]], ee[win[ee]])
+        np.logical_and.at(win, ee, first[fe] == ee)
+        lost = h1[~win]
+        h1, h2, outer = h1[win], h2[win], outer[win]
+        a, b, c, d = Ff[h1], Ff[nxt(h1)], Ff[prv(h1)], Ff[prv(h2)]
+        g1, g2 = h1 - h1 % 3, h2 - h2 % 3
+        F[g1 // 3] = np.stack([a, d, c], 1)
+        F[g2 // 3] = np.stack([d, b, c], 1)
+        t_bc, t_ca, t_ad, t_db = outer.T
+        twin[g1], twin[g1 + 1], twin[g1 + 2] = t_ad, g2 + 2, t_ca
+        twin[g2], twin[g2 + 1], twin[g2 + 2] = t_db, t_bc, g1 + 1
+        for t, h in ((t_ad, g1), (t_ca, g1 + 2), (t_db, g2), (t_bc, g2 + 1)):
+            twin[t[t >= 0]] = h[t >= 0]
+        changed = np.concatenate([g1, g2]) // 3
+        angles.reshape(m, 3)[changed] = face_angles(P, F[changed])
+        cand = np.concatenate([g1, g1 + 1, g1 + 2, g2, g2 + 1, g2 + 2, lost])
+    return F
+
+
+def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: float = 0.45 * np.pi,
+              rounds: int = 3) -> np.ndarray:
+    """Remove boundary "ears" that cover empty space: a face ``(b1, b2, p)`` whose edge
+    ``b1-b2`` is on the boundary and whose third vertex ``p`` is not, when none of ``p``'s
+    neighbours in ``graph`` lies inside the face's angle at ``p`` (seen in ``p``'s tangent
+    plane) and that angle is at least ``min_angle`` (regular boundary faces have apex
+    angles near 45 or 60 degrees; on camelhead.xyz exactly the three ears reach 81).  Such
+    a face spans a concave notch of the boundary whose point ``p`` the boundary detection
+    missed; peeling it puts ``p`` on the boundary.  Each round peels faces with no vertex in
+    common, so the result stays a manifold disk.  **Returns:** the faces kept, in order."""
+    n, m = len(P), len(F)
+    deg = np.diff(graph.indptr)
+    src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
+    twin = half_edge_twins(F, n)
+    alive = np.ones(m, bool)
+    for _ in range(rounds):
+        # Boundary half-edges: alive, with no alive face across.
+        bd = np.flatnonzero(np.repeat(alive, 3) & ((twin < 0) | ~alive[np.maximum(twin, 0) // 3]))
+        on_bd = np.zeros(n, bool)
+        on_bd[src[bd]] = True
+        h = bd[~on_bd[opp[bd]]]
+        faces = h // 3
+        h = h[np.bincount(faces, minlength=m)[faces] == 1]   # one boundary edge only
+        if h.size == 0:
+            break
+        b1, b2, p = src[h], dst[h], opp[h]
+        # The neighbours of each apex, padded with the apex's b1 (ignored below).
+        width_max = int(deg[p].max())
+        col = np.arange(width_max)
+        near = graph.indices[np.minimum(graph.indptr[p][:, None] + col, graph.indices.size - 1)]
+        near = np.where(col < deg[p][:, None], near, b1[:, None])
+        nrm = graph.normal[p]
+        ref = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+        e1 = np.cross(nrm, ref)
+        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+        e2 = np.cross(nrm, e1)
+
+        def angle(q):                                       # (c, m) angles of points q around p
+            d = P[q] - P[p][:, None, :]
+            return np.arctan2(np.einsum("cmd,cd->cm", d, e2), np.einsum("cmd,cd->cm", d, e1))
+
+        t1, t2 = angle(b1[:, None])[:, 0], angle(b2[:, None])[:, 0]
+        width = np.mod(t2 - t1, 2 * np.pi)
+        start = np.where(width > np.pi, t2, t1)
+        width = np.where(width > np.pi, 2 * np.pi - width, width)
+        rel = np.mod(angle(near) - start[:, None], 2 * np.pi)
+        others = (near != b1[:, None]) & (near != b2[:, None])
+        inside = others & (rel > 1e-6) & (rel < width[:, None] - 1e-6)
+        ear = np.flatnonzero((width >= min_angle) & ~inside.any(axis=1))
+        if ear.size == 0:
+            break
+        # Independent: no two peeled faces share a vertex in this round.
+        verts = np.stack([b1[ear], b2[ear], p[ear]], 1)
+        first = np.full(n, ear.size)
+        np.minimum.at(first, verts.reshape(-1), np.repeat(np.arange(ear.size), 3))
+        ok = np.all(first[verts] == np.arange(ear.size)[:, None], axis=1)
+        alive[h[ear[ok]] // 3] = False
+    return F[alive]
+
+
+def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
+    """``(m,) bool``: the faces flagged ``bad (m,) bool`` that reach the triangulation's
+    outside through bad faces only (``F (m, 3)`` manifold over ``n`` vertices)."""
+    m = len(F)
+    twin = half_edge_twins(F, n)
+    h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
+    a, b = h // 3, twin[h] // 3
+    both = bad[a] & bad[b]
+    hull_faces = np.unique(np.flatnonzero(twin < 0) // 3)
+    hull_faces = hull_faces[bad[hull_faces]]
+    out = m
+    rows = np.concatenate([a[both], b[both], np.full(hull_faces.size, out)])
+    cols = np.concatenate([b[both], a[both], hull_faces])
+    G = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(m + 1, m + 1))
+    reached = breadth_first_order(G, out, directed=False, return_predecessors=False)
+    mask = np.zeros(m + 1, bool)
+    mask[reached] = True
+    return mask[:m]
+
+
+def largest_manifold_disk(F: np.ndarray, n: int, *, max_rounds: int = 50):
+    """Make a subset ``F (m, 3)`` of a planar triangulation over ``n`` vertices a manifold
+    disk: drop the faces at vertices where the boundary touches itself (more than two
+    boundary edges: a bowtie left by the peeling), then keep the largest edge-connected
+    component, until neither is left (at most ``max_rounds`` times).
+
+    **Returns:** ``(faces, topology)``, the faces kept in their order and their
+    :class:`~jaxparam.topology.Topology`."""
+    twin = half_edge_twins(F, n)              # a face subset's twins: these, or -1 across a gap
+    src = F.reshape(-1)
+    alive = np.ones(len(F), bool)
+    for _ in range(max_rounds):
+        # Boundary half-edges leaving each vertex: more than one at a bowtie.
+        bd = np.repeat(alive, 3) & ((twin < 0) | ~alive[np.maximum(twin, 0) // 3])
+        bowtie = np.bincount(src[bd], minlength=n) > 1
+        if bowtie.any():
+            alive &= ~bowtie[F].any(1)
+            continue
+        t = topo.build(F[alive], n, where="reconstruct_surface")
+        if t.n_components > 1:
+            big = int(np.argmax(np.bincount(t.components[t.components >= 0])))
+            alive[np.flatnonzero(alive)[t.components[F[alive][:, 0]] != big]] = False
+            continue
+        return F[alive], t
+    raise PointCloudError("reconstruct_surface: could not extract a manifold disk from the "
+                          "triangulation; try a larger k or bridge_factor.")
