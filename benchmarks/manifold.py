@@ -47,7 +47,7 @@ def main() -> int:
         t_map = time.perf_counter() - t
         t = time.perf_counter()
         semi = param.remesh(3)
-        X = np.asarray(semi.vertices)
+        X = np.asarray(semi.mesh.vertices)
         t_remesh = time.perf_counter() - t
         V = np.asarray(mesh.vertices)
         diag = np.linalg.norm(np.ptp(V, axis=0))
@@ -55,7 +55,7 @@ def main() -> int:
         if igl is not None:
             d2 = igl.point_mesh_squared_distance(X, V, mesh.faces)[0]
             dist = f"{100 * np.sqrt(d2.max()) / diag:.1e}"
-        small = np.asarray(jp.wavelets.compress(semi, 0.05).vertices)
+        small = np.asarray(jp.wavelets.compress(semi, 0.05).mesh.vertices)
         rms = 100 * np.sqrt(np.mean(np.sum((small - X) ** 2, 1))) / diag
         print(f"{name:>20s} {mesh.topology.genus:5d} {mesh.n_faces:6d} {nb:5d} {'ok':>7s} {t_map:7.1f} "
               f"{param.mesh.n_vertices:10d} {t_remesh:8.2f} {dist:>10s} {rms:9.3f}", flush=True)

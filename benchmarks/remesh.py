@@ -53,31 +53,31 @@ def main() -> int:
             t_locate = time.perf_counter() - t
             t = time.perf_counter()
             semi = jp.remesh(mesh, uv, levels=levels)
-            np.asarray(semi.vertices)
+            np.asarray(semi.mesh.vertices)
             t_all = time.perf_counter() - t
             # Each vertex against the face it was lifted from: distance to that face's plane.
             V = np.asarray(mesh.vertices)
-            X = np.asarray(semi.vertices)
+            X = np.asarray(semi.mesh.vertices)
             P = V[mesh.faces[face]]
             n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
             n /= np.linalg.norm(n, axis=1, keepdims=True)
             off = np.abs(np.sum((X - P[:, 0]) * n, 1)).max()
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-            print(f"{mesh.n_faces:12d} {levels:6d} {semi.n_faces:12d} {t_refine:9.3f} {t_locate:9.3f} "
+            print(f"{mesh.n_faces:12d} {levels:6d} {semi.mesh.n_faces:12d} {t_refine:9.3f} {t_locate:9.3f} "
                   f"{t_all:9.3f} {off:18.1e} {peak:8.0f}", flush=True)
 
     mesh = base
     semi = jp.remesh(mesh, jp.convex_map(mesh), levels=6)
-    V = np.asarray(semi.vertices)
+    V = np.asarray(semi.mesh.vertices)
     diag = np.linalg.norm(np.ptp(V, axis=0))
-    print(f"\ncompression of camelhead's level-6 remesh ({semi.n_vertices} vertices)")
+    print(f"\ncompression of camelhead's level-6 remesh ({semi.mesh.n_vertices} vertices)")
     print(f"{'wavelet':>8s} {'keep':>6s} {'stored %':>9s} {'RMS err %':>10s} {'max err %':>10s} {'seconds':>8s}")
     for wavelet in ("lazy", "lifted"):
         jp.wavelets.compress(semi, 0.01, wavelet=wavelet)       # compiles
         for keep in (0.01, 0.02, 0.05, 0.1, 0.2):
             t = time.perf_counter()
             small = jp.wavelets.compress(semi, keep, wavelet=wavelet)
-            X = np.asarray(small.vertices)
+            X = np.asarray(small.mesh.vertices)
             sec = time.perf_counter() - t
             e = np.linalg.norm(X - V, axis=1) / diag
             print(f"{wavelet:>8s} {keep:6.2f} {100 * small.stored_fraction:9.2f} "

@@ -141,13 +141,14 @@ def plot_remesh(semi, path, *, title: str | None = None, elev: float = 30, azim:
     """Two panels: the remesh on the surface, its faces shaded and coloured by the base
     triangle they come from, with edges drawn; and its parameter domain ``semi.uv``
     (the refined base domain ``T^j``; left out for closed remeshes, which have none).
-    ``semi`` is a :func:`jaxparam.remesh` or ``ManifoldParameterization.remesh`` result."""
+    ``semi`` is a :class:`jaxparam.remesh.Remesh` (from :func:`jaxparam.remesh` or
+    ``ManifoldParameterization.remesh``)."""
     from matplotlib.collections import PolyCollection
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    V = np.asarray(semi.vertices, np.float64)
+    V = np.asarray(semi.mesh.vertices, np.float64)
     U = None if semi.uv is None else np.asarray(semi.uv, np.float64)
-    F = semi.faces
+    F = semi.mesh.faces
     base_of = np.arange(F.shape[0]) // (4 ** semi.hierarchy.levels)   # children follow their parent
     P = V[F]
     light = _shade(P)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh import TriMesh, grid_faces
+from .subdivision import midpoint_refine
 
 __all__ = ["grid_faces", "plane_grid", "graph_surface", "cylinder_patch", "example5",
            "disk", "sphere", "torus", "refine"]
@@ -113,16 +114,14 @@ def torus(nu: int = 24, nv: int = 12, *, R: float = 1.0, r: float = 0.35) -> Tri
 
 
 def _split(V: np.ndarray, F: np.ndarray):
-    """One 1-to-4 midpoint split (vectorized); new vertices follow the old ones."""
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    uniq, inv = np.unique(E, axis=0, return_inverse=True)
-    inv = inv.reshape(3, -1).T + V.shape[0]
-    mids = 0.5 * (V[uniq[:, 0]] + V[uniq[:, 1]])
-    a, b, c = F.T
-    ab, bc, ca = inv.T
-    Fn = np.concatenate([np.stack([a, ab, ca], 1), np.stack([b, bc, ab], 1),
-                         np.stack([c, ca, bc], 1), np.stack([ab, bc, ca], 1)])
-    return np.concatenate([V, mids]), Fn
+    """One 1-to-4 midpoint split (:func:`jaxparam.subdivision.midpoint_refine`); new vertices
+    follow the old ones.  The faces keep this module's own order, child by child (the corner
+    children of ``a``, ``b``, ``c``, then the middle ones, each block over all faces, rotated
+    to start at ``a``, ``b``, ``c``, ``ab``), so the generated meshes stay as they always were."""
+    V1, F1 = midpoint_refine(V, F)
+    C = F1.reshape(-1, 4, 3)                        # (a, ab, ca), (ab, b, bc), (ca, bc, c), (bc, ca, ab)
+    return V1, np.concatenate([C[:, 0], C[:, 1][:, [1, 2, 0]], C[:, 2][:, [2, 0, 1]],
+                               C[:, 3][:, [2, 0, 1]]])
 
 
 def refine(mesh: TriMesh, times: int = 1) -> TriMesh:

@@ -16,28 +16,43 @@ vertex new at level ``l + 1``, its wavelet coefficient in ``W^l``:
 
 Both are exactly invertible (:func:`synthesize` undoes :func:`analyze` step by step).
 :func:`compress` keeps the largest coefficients, measured in the L2 norm of their hat
-functions (``|d| 2^-l`` at level ``l``).  Everything is written in JAX: analysis,
-synthesis and compression (for a fixed choice of kept coefficients) are differentiable.
+functions (``|d| 2^-l`` at level ``l``), and returns a :class:`Compressed`.
+
+The input is a :class:`jaxparam.remesh.Remesh` (from :func:`jaxparam.remesh` or
+:meth:`jaxparam.manifold.ManifoldParameterization.remesh`), a :class:`Compressed`, or a
+:class:`~jaxparam.TriMesh` numbered as they write it (e.g. read back from an OBJ file), whose
+:class:`~jaxparam.subdivision.Hierarchy` is then read from its faces or given as
+``hierarchy=``.
+
+Everything is written in JAX: analysis, synthesis and compression (for a fixed choice of
+kept coefficients) are differentiable, and the results are pytrees.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .errors import MeshError
 from .mesh import TriMesh
-from .remesh import Hierarchy, hierarchy_from_faces
+from .remesh import Remesh
+from .subdivision import Hierarchy, hierarchy_from_faces
 
+__all__ = ["WAVELETS", "Coefficients", "Compressed", "analyze", "synthesize", "compress"]
+
+#: The wavelets :func:`analyze` knows.
 WAVELETS = ("lazy", "lifted")
 
 
+@jax.tree_util.register_pytree_node_class
 @dataclass(frozen=True, eq=False)
 class Coefficients:
     """``base (n_0, 3)``: positions of the base vertices (after lifting, for ``"lifted"``);
     ``details``: ``details[l]`` the ``(n_{l+1} - n_l, 3)`` coefficients of level ``l``;
-    ``hierarchy`` and ``wavelet`` as analysed."""
+    ``hierarchy`` and ``wavelet`` as analysed.  A JAX pytree (``base`` and ``details`` the
+    leaves)."""
 
     base: jnp.ndarray
     details: tuple
@@ -49,17 +64,67 @@ class Coefficients:
         """Number of wavelet coefficients (3-vectors) over all levels."""
         return int(sum(d.shape[0] for d in self.details))
 
+    def tree_flatten(self):
+        return (self.base, self.details), (self.hierarchy, self.wavelet)
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls(children[0], tuple(children[1]), *aux)
+
 
 def _check_wavelet(wavelet: str) -> None:
     if wavelet not in WAVELETS:
         raise MeshError(f"wavelets: unknown wavelet {wavelet!r}; use one of {WAVELETS}.")
 
 
-def _hierarchy_of(semi) -> Hierarchy:
-    H = getattr(semi, "hierarchy", None)
-    if H is None:
-        H = hierarchy_from_faces(semi.faces, semi.n_vertices)
-    return H
+@jax.tree_util.register_pytree_node_class
+@dataclass(frozen=True, eq=False, repr=False)
+class Compressed:
+    """What :func:`compress` returns.
+
+    - ``mesh``: a :class:`TriMesh` with the input's connectivity, vertex order and UVs, its
+      vertices synthesized from the kept coefficients;
+    - ``hierarchy``: the input's :class:`~jaxparam.subdivision.Hierarchy`;
+    - ``kept``: the number of wavelet coefficients (3-vectors) kept;
+    - ``stored_fraction``: the base vertices plus the kept coefficients over the vertex
+      count (the survey's "less than 2 %").
+
+    A JAX pytree: ``mesh`` is the leaf, the rest static data.
+    """
+
+    mesh: TriMesh
+    hierarchy: Hierarchy
+    kept: int
+    stored_fraction: float
+
+    def __repr__(self) -> str:
+        return (f"Compressed({self.mesh!r}, kept {self.kept} coefficients, "
+                f"{100 * self.stored_fraction:.2f} % stored)")
+
+    def tree_flatten(self):
+        return (self.mesh,), (self.hierarchy, self.kept, self.stored_fraction)
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls(children[0], *aux)
+
+
+def _mesh_and_hierarchy(semi, hierarchy, where: str):
+    """The mesh and hierarchy of a :class:`Remesh`, a :class:`Compressed` or a TriMesh."""
+    if isinstance(semi, (Remesh, Compressed)):
+        if hierarchy is not None:
+            raise MeshError(f"wavelets.{where}: hierarchy= is for a TriMesh; a {type(semi).__name__} "
+                            "carries its own.")
+        return semi.mesh, semi.hierarchy
+    if not isinstance(semi, TriMesh):
+        raise MeshError(f"wavelets.{where}: expected a Remesh (jp.remesh), a Compressed or a TriMesh, "
+                        f"got {type(semi).__name__}.")
+    if hierarchy is None:
+        hierarchy = hierarchy_from_faces(semi.faces, semi.n_vertices)
+    elif not isinstance(hierarchy, Hierarchy) or hierarchy.counts[-1] != semi.n_vertices:
+        raise MeshError(f"wavelets.{where}: hierarchy must be a Hierarchy of the mesh's "
+                        f"{semi.n_vertices} vertices.")
+    return semi, hierarchy
 
 
 def _update_weights(H: Hierarchy, level: int) -> np.ndarray:
@@ -76,22 +141,24 @@ def _lift(X, H: Hierarchy, level: int, d, sign: float):
     return X + sign * sigma[:, None] * s
 
 
-def analyze(semi, *, wavelet: str = "lifted") -> Coefficients:
+def analyze(semi, *, wavelet: str = "lifted", hierarchy: Hierarchy | None = None) -> Coefficients:
     """Wavelet decomposition of a mesh with subdivision connectivity (eq. (12)).
 
-    **Arguments:** ``semi`` a :func:`jaxparam.remesh` result (or a mesh whose faces and
-    vertex order are as it writes them); ``wavelet`` ``"lifted"`` or ``"lazy"``.
+    **Arguments:** ``semi`` a :class:`~jaxparam.remesh.Remesh` (:func:`jaxparam.remesh`), a
+    :class:`Compressed`, or a :class:`TriMesh` whose faces and vertex order are as they
+    write them; ``wavelet`` ``"lifted"`` or ``"lazy"``; ``hierarchy`` only with a TriMesh:
+    its :class:`~jaxparam.subdivision.Hierarchy` (read from its faces when left out).
 
     **Returns:** :class:`Coefficients`.
 
     Example::
 
         c = jp.wavelets.analyze(semi)
-        jp.wavelets.synthesize(c)        # == semi.vertices up to rounding
+        jp.wavelets.synthesize(c)        # == semi.mesh.vertices up to rounding
     """
     _check_wavelet(wavelet)
-    H = _hierarchy_of(semi)
-    X = jnp.asarray(semi.vertices, dtype=jnp.float64)
+    mesh, H = _mesh_and_hierarchy(semi, hierarchy, "analyze")
+    X = jnp.asarray(mesh.vertices, dtype=jnp.float64)
     details = []
     for level in reversed(range(H.levels)):
         n = H.counts[level]
@@ -122,24 +189,28 @@ def synthesize(coeffs: Coefficients, *, level: int | None = None):
     return X
 
 
-def compress(semi, keep: float = 0.02, *, wavelet: str = "lifted") -> TriMesh:
+def compress(semi, keep: float = 0.02, *, wavelet: str = "lifted",
+             hierarchy: Hierarchy | None = None) -> Compressed:
     """Keep the largest fraction ``keep`` of the wavelet coefficients, drop the rest, and
     synthesize (the survey's data compression, §7 and Fig. 26).
 
-    **Arguments:** ``semi`` a :func:`jaxparam.remesh` result; ``keep`` in ``[0, 1]``;
-    ``wavelet`` ``"lifted"`` or ``"lazy"``.
+    **Arguments:** ``semi`` as :func:`analyze` takes it (a :func:`jaxparam.remesh` result, or
+    a TriMesh with ``hierarchy``); ``keep`` in ``[0, 1]``; ``wavelet`` ``"lifted"`` or
+    ``"lazy"``.
 
-    **Returns:** a :class:`TriMesh` with ``semi``'s connectivity and vertex order;
-    ``.kept`` the number of coefficients kept, ``.stored_fraction`` the base vertices plus
-    kept coefficients over the vertex count (the survey's "less than 2 %").
+    **Returns:** a :class:`Compressed`: ``.mesh`` with ``semi``'s connectivity, vertex order
+    and UVs, ``.kept`` the number of coefficients kept, ``.stored_fraction`` the base
+    vertices plus kept coefficients over the vertex count.
 
     Example::
 
         small = jp.wavelets.compress(semi, keep=0.02)
+        jp.save("small.obj", small.mesh)
     """
     if not (isinstance(keep, (int, float, np.floating)) and 0.0 <= float(keep) <= 1.0):
         raise MeshError(f"wavelets.compress: keep must be a fraction in [0, 1], got {keep!r}.")
-    c = analyze(semi, wavelet=wavelet)
+    mesh, H = _mesh_and_hierarchy(semi, hierarchy, "compress")
+    c = analyze(mesh, wavelet=wavelet, hierarchy=H)
     if c.count == 0:
         kept_masks = []
     else:
@@ -150,9 +221,6 @@ def compress(semi, keep: float = 0.02, *, wavelet: str = "lifted") -> TriMesh:
         chosen[np.argsort(-score, kind="stable")[:n_keep]] = True
         kept_masks = np.split(chosen, np.cumsum([d.shape[0] for d in c.details])[:-1])
     details = tuple(jnp.where(jnp.asarray(m)[:, None], d, 0.0) for m, d in zip(kept_masks, c.details))
-    X = synthesize(Coefficients(c.base, details, c.hierarchy, wavelet))
-    out = semi.with_vertices(X)
-    out.hierarchy = c.hierarchy
-    out.kept = int(sum(int(m.sum()) for m in kept_masks))
-    out.stored_fraction = (c.hierarchy.counts[0] + out.kept) / semi.n_vertices
-    return out
+    X = synthesize(Coefficients(c.base, details, H, wavelet))
+    kept = int(sum(int(m.sum()) for m in kept_masks))
+    return Compressed(mesh.with_vertices(X), H, kept, (H.counts[0] + kept) / mesh.n_vertices)

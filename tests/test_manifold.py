@@ -1,6 +1,7 @@
 """Closed meshes of any genus (jaxparam.manifold, survey §9)."""
 import json
 
+import jax
 import numpy as np
 import pytest
 
@@ -8,7 +9,8 @@ import jaxparam as jp
 from conftest import data_path
 from jaxparam.cli import main
 from jaxparam.errors import MeshError, TopologyError
-from jaxparam.manifold import REFERENCE, decimate, manifold_map
+from jaxparam.manifold import REFERENCE, ManifoldParameterization, decimate, manifold_map
+from jaxparam.remesh import Remesh
 
 
 def signed_volume(V, F):
@@ -54,17 +56,43 @@ def test_the_parameterization_covers_the_surface_once(torus):
 def test_the_remesh_is_closed_with_the_genus_and_subdivision_connectivity(torus):
     mesh, base, param = torus
     semi = param.remesh(2)
-    t = semi.topology
-    assert semi.n_faces == 40 * 16 and t.is_closed and t.genus == 1 and t.n_components == 1
-    np.testing.assert_allclose(np.asarray(semi.vertices)[:base.n_vertices], np.asarray(base.vertices), atol=1e-12)
+    assert isinstance(semi, Remesh) and semi.uv is None and semi.levels == 2
+    np.testing.assert_array_equal(semi.base_faces, param.base_faces)
+    t = semi.mesh.topology
+    assert semi.mesh.n_faces == 40 * 16 and t.is_closed and t.genus == 1 and t.n_components == 1
+    np.testing.assert_allclose(np.asarray(semi.mesh.vertices)[:base.n_vertices], np.asarray(base.vertices),
+                               atol=1e-12)
     # On the torus of radii 1 and 0.35, up to the sagittas of its 40 x 20 polygons
     # (0.35 (1 - cos(pi / 20)) = 0.0043 across the tube, 1.35 (1 - cos(pi / 40)) = 0.0042 round).
-    X = np.asarray(semi.vertices)
+    X = np.asarray(semi.mesh.vertices)
     r = np.hypot(np.hypot(X[:, 0], X[:, 1]) - 1.0, X[:, 2])
     assert np.all(np.abs(r - 0.35) < 0.0043 + 0.0042 + 1e-9)
     c = jp.wavelets.analyze(semi)
     np.testing.assert_allclose(np.asarray(jp.wavelets.synthesize(c)), X, atol=1e-13)
-    assert signed_volume(X, semi.faces) > 0
+    assert signed_volume(X, semi.mesh.faces) > 0
+
+
+def test_the_parameterization_and_its_remesh_survive_pytree_round_trips(torus):
+    mesh, base, param = torus
+    back = jax.tree_util.tree_map(lambda x: x, param)
+    assert isinstance(back, ManifoldParameterization)
+    for f in ("base_vertices", "base_faces", "region", "face_uv", "vertex_face", "vertex_bary"):
+        assert getattr(back, f) is getattr(param, f)
+    np.testing.assert_array_equal(np.asarray(back.mesh.vertices), np.asarray(param.mesh.vertices))
+    assert jax.tree_util.tree_structure(back) == jax.tree_util.tree_structure(param)
+    # The lift is differentiable in the mesh's positions: d(sum of lifted points) / dV.
+    q = param.vertex_bary[:5] @ REFERENCE
+
+    def lifted(p):
+        return p.lift(param.vertex_face[:5], q).sum()
+
+    g = jax.grad(lifted)(param)
+    assert isinstance(g, ManifoldParameterization)
+    np.testing.assert_allclose(float(np.asarray(g.mesh.vertices).sum()), 3 * 5, rtol=1e-12)
+    semi = param.remesh(1)
+    again = jax.tree_util.tree_map(lambda x: x, semi)
+    assert isinstance(again, Remesh) and again.hierarchy is semi.hierarchy
+    np.testing.assert_array_equal(np.asarray(again.mesh.vertices), np.asarray(semi.mesh.vertices))
 
 
 def test_bad_manifold_input_is_named(torus):
@@ -81,6 +109,7 @@ def test_bad_manifold_input_is_named(torus):
         torus[2].remesh(9)
 
 
+@pytest.mark.slow
 @pytest.mark.data
 @pytest.mark.peer
 def test_cow_remesh_lies_on_the_surface_and_cli_writes_it(tmp_path):

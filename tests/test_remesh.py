@@ -9,7 +9,9 @@ import pytest
 import jaxparam as jp
 from jaxparam.cli import main
 from jaxparam.errors import MeshError, TopologyError
-from jaxparam.remesh import base_domain, dyadic_refine, hierarchy_from_faces, refine_domain
+from jaxparam.remesh import Remesh, base_domain, refine_domain
+from jaxparam.subdivision import (CHILDREN, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces,
+                                  midpoint_refine, split_corner_values)
 from jaxparam.triangles import locate
 
 
@@ -59,19 +61,21 @@ def test_locate_agrees_with_a_brute_force_search_and_rejects_outside_points(disk
 
 def test_remesh_has_subdivision_connectivity_and_lies_on_the_surface(surface, semi):
     mesh, uv = surface
-    H = semi.hierarchy
-    assert H.levels == 3 and semi.n_faces == 6 * 4 ** 3 and H.counts[-1] == semi.n_vertices
-    assert semi.topology.is_disk
-    assert np.all(area2(np.asarray(semi.uv), semi.faces) > 0)       # T^j is a triangulation
+    H, out = semi.hierarchy, semi.mesh
+    assert isinstance(semi, Remesh) and semi.uv is out.uv and semi.levels == 3
+    assert H.levels == 3 and out.n_faces == 6 * 4 ** 3 and H.counts[-1] == out.n_vertices
+    assert out.topology.is_disk
+    np.testing.assert_array_equal(semi.base_faces, H.faces[0])
+    assert np.all(area2(np.asarray(semi.uv), out.faces) > 0)       # T^j is a triangulation
     # eq. (11): every vertex is psi^{-1} of its parameter point, i.e. on the input's faces.
     face, bary = locate(uv, mesh.faces, np.asarray(semi.uv))
     X = np.einsum("kc,kcd->kd", bary, np.asarray(mesh.vertices)[mesh.faces[face]])
-    np.testing.assert_allclose(np.asarray(semi.vertices), X, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(out.vertices), X, atol=1e-12)
     # Boundary vertices lie on the parameter domain's boundary polygon (so on the surface's
     # boundary): distance to the polygon's segments.
     loop = mesh.topology.boundary_loops[0]
     A, B = uv[loop], uv[np.roll(loop, -1)]
-    Q = np.asarray(semi.uv)[semi.topology.boundary]
+    Q = np.asarray(semi.uv)[out.topology.boundary]
     t = np.clip(np.einsum("qsd,sd->qs", Q[:, None] - A[None], B - A) / np.sum((B - A) ** 2, 1), 0, 1)
     d = np.linalg.norm(Q[:, None] - (A[None] + t[..., None] * (B - A)[None]), axis=2).min(1)
     assert d.max() < 1e-12
@@ -82,7 +86,7 @@ def test_remesh_has_subdivision_connectivity_and_lies_on_the_surface(surface, se
 
 def test_the_hierarchy_is_recovered_from_the_faces_alone(semi, tmp_path):
     p = tmp_path / "semi.obj"
-    jp.save(p, semi, semi.uv)
+    jp.save(p, semi.mesh)                                      # the parameter points as vt
     back = jp.load(p)
     H = hierarchy_from_faces(back.faces, back.n_vertices)
     assert H.counts == semi.hierarchy.counts
@@ -102,8 +106,8 @@ def test_a_square_map_with_its_corners_is_covered_exactly():
     lo, hi = uv.min(0), uv.max(0)
     assert all(np.all(np.isclose(uv[v], lo) | np.isclose(uv[v], hi)) for v in at_corner)
     semi = jp.remesh(mesh, uv, levels=2, corners=corners)
-    assert semi.n_faces == 4 * 16
-    total = 0.5 * area2(np.asarray(semi.uv), semi.faces).sum()
+    assert semi.mesh.n_faces == 4 * 16
+    total = 0.5 * area2(np.asarray(semi.uv), semi.mesh.faces).sum()
     np.testing.assert_allclose(total, np.prod(hi - lo), rtol=1e-12)
 
 
@@ -113,7 +117,7 @@ def test_remesh_is_differentiable_in_the_vertex_positions(surface):
 
     def loss(V):
         s = jp.remesh(jp.TriMesh(V, faces, validate=False), uv, levels=2)
-        return jnp.sum(s.vertices[:, 2] ** 2) + jnp.sum(jp.wavelets.analyze(s).details[-1] ** 2)
+        return jnp.sum(s.mesh.vertices[:, 2] ** 2) + jnp.sum(jp.wavelets.analyze(s).details[-1] ** 2)
 
     V0 = jnp.asarray(mesh.vertices)
     g = jax.grad(loss)(V0)
@@ -135,6 +139,12 @@ def test_bad_remesh_input_is_named(surface):
         jp.remesh(mesh, bad, levels=1)
     with pytest.raises(MeshError, match="at least 3 corners"):
         jp.remesh(mesh, uv, levels=1, corners=2)
+    with pytest.raises(MeshError, match="at least 3 corners"):
+        jp.remesh(mesh, uv, levels=1, base_faces=2)
+    with pytest.raises(MeshError, match="base_faces or corners, not both"):
+        jp.remesh(mesh, uv, levels=1, base_faces=5, corners=6)
+    with pytest.raises(MeshError, match="base_faces must be an integer.*corners="):
+        jp.remesh(mesh, uv, levels=1, base_faces=[0, 11, 22])
     with pytest.raises(MeshError, match=r"increasing positions in the boundary loop of 44 vertices.*\[0, 11, 50\]"):
         jp.remesh(mesh, uv, levels=1, corners=[0, 11, 50])
     with pytest.raises(TopologyError, match="closed"):
@@ -183,3 +193,50 @@ def test_holes_and_non_convex_domains_are_refused_with_a_remedy():
     uv = np.column_stack([x, y * (1 - 0.8 * np.exp(-((x - 0.5) / 0.12) ** 2))])
     with pytest.raises(MeshError, match="convex boundary map"):
         jp.remesh(grid, uv, levels=2, corners=8)
+
+
+def test_base_faces_names_the_fan_and_corners_stays_its_alias(surface, semi):
+    mesh, uv = surface
+    for kw in ({"base_faces": 5}, {"corners": 5}):
+        s = jp.remesh(mesh, uv, levels=1, **kw)
+        assert s.base_faces.shape == (5, 3) and s.mesh.n_faces == 5 * 4
+    same = jp.remesh(mesh, uv, levels=3, base_faces=6)             # the default is 6
+    np.testing.assert_array_equal(np.asarray(same.mesh.vertices), np.asarray(semi.mesh.vertices))
+
+
+def test_a_remesh_survives_pytree_round_trips(semi):
+    back = jax.tree_util.tree_map(lambda x: x, semi)
+    assert isinstance(back, Remesh) and back.hierarchy is semi.hierarchy
+    np.testing.assert_array_equal(np.asarray(back.mesh.vertices), np.asarray(semi.mesh.vertices))
+    np.testing.assert_array_equal(np.asarray(back.uv), np.asarray(semi.uv))
+    np.testing.assert_array_equal(back.mesh.faces, semi.mesh.faces)
+    jitted = jax.jit(lambda r: r.with_vertices(2.0 * r.mesh.vertices))(semi)
+    assert isinstance(jitted, Remesh) and jitted.hierarchy is semi.hierarchy
+    np.testing.assert_allclose(np.asarray(jitted.mesh.vertices), 2 * np.asarray(semi.mesh.vertices))
+    moved = semi.mesh.with_vertices(semi.mesh.vertices + 1.0)      # the mesh keeps its UVs
+    assert moved.uv is semi.uv and moved.topology is semi.mesh.topology
+    # What wavelets need travels with it: analysing the round trip gives the same coefficients.
+    a, b = jp.wavelets.analyze(semi), jp.wavelets.analyze(back)
+    np.testing.assert_array_equal(np.asarray(a.base), np.asarray(b.base))
+
+
+def test_subdivision_numbering_contract():
+    # Two triangles: children 4f .. 4f+3 in CHILDREN's order, new vertices in edge order.
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    F1, parents, on_bnd = dyadic_refine(F, 4)
+    w = np.concatenate([F, F1.reshape(2, 4, 3)[:, 3]], axis=1)     # (v1, v2, v3, w1, w2, w3)
+    np.testing.assert_array_equal(F1.reshape(2, 4, 3), w[:, CHILDREN])
+    keys = np.sort(parents, axis=1)
+    assert np.all(np.diff(keys[:, 0] * 4 + keys[:, 1]) > 0)        # sorted (min, max) pairs
+    H = dyadic_hierarchy(F, 4, 2)
+    assert H.counts == (4, 9, 25) and H.levels == 2
+    np.testing.assert_array_equal(H.faces[1], F1)
+    np.testing.assert_array_equal(H.on_boundary[0], on_bnd)
+    assert hierarchy_from_faces(H.faces[-1], 25).counts == H.counts
+    U = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    V1, G1 = midpoint_refine(U, F)
+    np.testing.assert_array_equal(G1, F1)
+    np.testing.assert_array_equal(V1[4:], U[parents].mean(1))
+    # Corner values carried to the children agree with the vertices' midpoints.
+    C = split_corner_values(U[F])
+    np.testing.assert_array_equal(C, V1[F1])

@@ -1,11 +1,12 @@
 """Wavelet multiresolution of meshes with subdivision connectivity (jaxparam.wavelets, §7)."""
+import jax
 import numpy as np
 import pytest
 
 import jaxparam as jp
 from jaxparam.errors import MeshError
-from jaxparam.remesh import Hierarchy, dyadic_refine
-from jaxparam.wavelets import analyze, compress, synthesize
+from jaxparam.subdivision import dyadic_hierarchy
+from jaxparam.wavelets import Coefficients, Compressed, analyze, compress, synthesize
 
 
 @pytest.fixture(scope="module")
@@ -17,8 +18,8 @@ def semi():
 @pytest.mark.parametrize("wavelet", ["lazy", "lifted"])
 def test_synthesis_inverts_analysis(semi, wavelet):
     c = analyze(semi, wavelet=wavelet)
-    assert c.base.shape == (7, 3) and c.count == semi.n_vertices - 7
-    np.testing.assert_allclose(np.asarray(synthesize(c)), np.asarray(semi.vertices), atol=1e-13)
+    assert c.base.shape == (7, 3) and c.count == semi.mesh.n_vertices - 7
+    np.testing.assert_allclose(np.asarray(synthesize(c)), np.asarray(semi.mesh.vertices), atol=1e-13)
     for level, n in enumerate(semi.hierarchy.counts):
         assert synthesize(c, level=level).shape == (n, 3)
 
@@ -27,7 +28,7 @@ def test_lazy_levels_are_subsamplings(semi):
     c = analyze(semi, wavelet="lazy")
     for level, n in enumerate(semi.hierarchy.counts):
         np.testing.assert_allclose(np.asarray(synthesize(c, level=level)),
-                                   np.asarray(semi.vertices)[:n], atol=1e-13)
+                                   np.asarray(semi.mesh.vertices)[:n], atol=1e-13)
 
 
 def test_an_affine_surface_has_no_details():
@@ -46,32 +47,26 @@ def test_an_affine_surface_has_no_details():
 def test_the_lifted_coarse_levels_keep_the_mean_on_a_regular_mesh():
     # A torus triangulation is valence 6 everywhere, and stays so under refinement.
     torus = jp.shapes.torus(8, 6)
-    F, n = torus.faces, torus.n_vertices
-    counts, parents, faces = [n], [], [F]
-    for _ in range(2):
-        F, par, _ = dyadic_refine(F, counts[-1])
-        counts.append(counts[-1] + par.shape[0])
-        parents.append(par)
-        faces.append(F)
-    H = Hierarchy(tuple(counts), tuple(parents), tuple(faces))
-    X = np.random.default_rng(0).normal(size=(counts[-1], 3))
-    mesh = jp.TriMesh(X, F, validate=False)
-    mesh.hierarchy = H
-    lifted, lazy = analyze(mesh, wavelet="lifted"), analyze(mesh, wavelet="lazy")
+    H = dyadic_hierarchy(torus.faces, torus.n_vertices, 2)
+    X = np.random.default_rng(0).normal(size=(H.counts[-1], 3))
+    mesh = jp.TriMesh(X, H.faces[-1], validate=False)
+    lifted, lazy = analyze(mesh, wavelet="lifted", hierarchy=H), analyze(mesh, wavelet="lazy", hierarchy=H)
     np.testing.assert_allclose(np.asarray(lifted.base).mean(0), X.mean(0), atol=1e-12)
     assert np.abs(np.asarray(lazy.base).mean(0) - X.mean(0)).max() > 1e-3
 
 
 @pytest.mark.parametrize("wavelet", ["lazy", "lifted"])
 def test_compression_error_falls_as_more_coefficients_are_kept(semi, wavelet):
-    V = np.asarray(semi.vertices)
+    V, n = np.asarray(semi.mesh.vertices), semi.mesh.n_vertices
     errors = []
     for keep in (0.0, 0.05, 0.2, 0.5, 1.0):
         small = compress(semi, keep, wavelet=wavelet)
-        np.testing.assert_array_equal(small.faces, semi.faces)
-        assert small.kept == round(keep * (semi.n_vertices - 7))
-        assert small.stored_fraction == pytest.approx((7 + small.kept) / semi.n_vertices)
-        errors.append(np.sqrt(np.mean(np.sum((np.asarray(small.vertices) - V) ** 2, 1))))
+        assert isinstance(small, Compressed) and small.hierarchy is semi.hierarchy
+        np.testing.assert_array_equal(small.mesh.faces, semi.mesh.faces)
+        assert small.mesh.uv is semi.uv                            # the parameter points stay
+        assert small.kept == round(keep * (n - 7))
+        assert small.stored_fraction == pytest.approx((7 + small.kept) / n)
+        errors.append(np.sqrt(np.mean(np.sum((np.asarray(small.mesh.vertices) - V) ** 2, 1))))
     assert errors[-1] < 1e-13 and errors[0] > 1e-3
     assert all(a >= b for a, b in zip(errors, errors[1:]))
 
@@ -85,3 +80,36 @@ def test_bad_wavelet_input_is_named(semi):
         synthesize(analyze(semi), level=4)
     with pytest.raises(MeshError, match="subdivision connectivity"):
         analyze(jp.shapes.graph_surface(5))
+    with pytest.raises(MeshError, match="hierarchy= is for a TriMesh"):
+        analyze(semi, hierarchy=semi.hierarchy)
+    with pytest.raises(MeshError, match="hierarchy must be a Hierarchy of the mesh's 25 vertices"):
+        analyze(jp.shapes.graph_surface(5), hierarchy=semi.hierarchy)
+    with pytest.raises(MeshError, match="expected a Remesh"):
+        analyze(np.zeros((7, 3)))
+
+
+def test_a_mesh_read_back_and_its_explicit_hierarchy_give_the_remesh_s_coefficients(semi, tmp_path):
+    jp.save(tmp_path / "semi.obj", semi.mesh)
+    back = jp.load(tmp_path / "semi.obj")                       # a TriMesh: hierarchy from its faces
+    for c in (analyze(back), analyze(back, hierarchy=semi.hierarchy)):
+        np.testing.assert_allclose(np.asarray(c.base), np.asarray(analyze(semi).base), atol=1e-15)
+    small = compress(back, 0.1)
+    np.testing.assert_allclose(np.asarray(small.mesh.vertices),
+                               np.asarray(compress(semi, 0.1).mesh.vertices), atol=1e-15)
+    # A compressed result can be analysed again, with its own hierarchy.
+    assert analyze(small).count == analyze(semi).count
+
+
+def test_results_survive_pytree_round_trips(semi):
+    small = compress(semi, 0.1)
+    back = jax.tree_util.tree_map(lambda x: x, small)
+    assert isinstance(back, Compressed) and back.hierarchy is small.hierarchy
+    assert (back.kept, back.stored_fraction) == (small.kept, small.stored_fraction)
+    np.testing.assert_array_equal(np.asarray(back.mesh.vertices), np.asarray(small.mesh.vertices))
+    np.testing.assert_array_equal(np.asarray(back.mesh.uv), np.asarray(small.mesh.uv))
+    c = analyze(semi)
+    c2 = jax.tree_util.tree_map(lambda x: x, c)
+    assert isinstance(c2, Coefficients) and c2.hierarchy is c.hierarchy and c2.wavelet == c.wavelet
+    # Synthesis under jit, the coefficients passed whole.
+    X = jax.jit(synthesize)(c)
+    np.testing.assert_allclose(np.asarray(X), np.asarray(semi.mesh.vertices), atol=1e-13)
