@@ -1,12 +1,15 @@
 # Two set-up commands that work on a fresh machine with only Python 3.11:
 #   make demo   -> .venv, install, flatten a generated mesh, results in out/
-#   make test   -> .venv, install with test extras, run the test suite
+#   make test   -> .venv, install with test extras, run the test suite (slow tests and notebooks included)
+# and, once set up:
+#   make test-fast -> the suite without the tests marked slow (-m "not slow"; no notebooks)
+#   make notebooks -> execute every notebook in notebooks/ and check what it claims
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 
-.PHONY: demo test venv clean bench
+.PHONY: demo test test-fast notebooks venv clean bench
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +24,12 @@ demo: venv
 
 test: venv
 	$(PY) -m pytest -q -p no:cacheprovider tests
+
+test-fast: venv
+	$(PY) -m pytest -q -p no:cacheprovider -m "not slow" tests
+
+notebooks: venv
+	$(PY) -m pytest -q -p no:cacheprovider tests/test_notebooks.py
 
 bench: venv
 	$(PY) benchmarks/linear.py

@@ -18,43 +18,102 @@ def similarity_residual(uv, xy):
     return np.abs(A @ X - xy).max()
 
 
+def plane_coordinates(V):
+    """Coordinates of the (planar) points ``V`` in their plane: an isometry, computed here with
+    numpy's SVD, independently of the library's boundary maps."""
+    X = np.asarray(V, np.float64) - np.mean(V, axis=0)
+    _, sv, Vt = np.linalg.svd(X, full_matrices=False)
+    assert sv[2] <= 1e-12 * sv[0], "the points are not planar"
+    return X @ Vt[:2].T
+
+
 @pytest.mark.parametrize("kind", ["shape_preserving", "mean_value", "harmonic"])
 def test_linear_precision(kind):
     # Eq. (6): a planar mesh with boundary="plane" is reproduced up to a similarity.
     mesh = jp.shapes.plane_grid(9, 9, jitter=0.3, seed=3, tilt=True)
     uv = np.asarray(jp.convex_map(mesh, weights=kind, boundary="plane"))
-    flat = np.asarray(jp.boundary.plane(jnp.asarray(mesh.vertices)))   # the plane's own coordinates
+    flat = plane_coordinates(mesh.vertices)                            # the plane's own coordinates
     assert similarity_residual(uv, flat) < 1e-9
 
 
 def test_uniform_has_no_linear_precision():
     mesh = jp.shapes.plane_grid(9, 9, jitter=0.3, seed=3, tilt=True)
     uv = np.asarray(jp.convex_map(mesh, weights="uniform", boundary="plane"))
-    flat = np.asarray(jp.boundary.plane(jnp.asarray(mesh.vertices)))
+    flat = plane_coordinates(mesh.vertices)
     A = np.column_stack([uv, np.ones(len(uv))])
     X, *_ = np.linalg.lstsq(A, flat, rcond=None)
     assert np.abs(A @ X - flat).max() > 1e-3
 
 
+def grid_corner_positions(mesh, n=12):
+    """Loop positions of the ``n x n`` grid's four corner vertices, the loop's first vertex first.
+
+    Pinning the square's corners there puts no dividing edge of the grid (the two corner
+    triangles' diagonals) along a side of the square."""
+    loop = mesh.topology.boundary_loops[0]
+    pos = sorted(int(np.flatnonzero(loop == c)[0]) for c in (0, n - 1, n * n - n, n * n - 1))
+    assert pos[0] == 0, "the grid's boundary loop no longer starts at a corner"
+    return pos
+
+
 @pytest.mark.parametrize("kind", jp.weights.KINDS)
 @pytest.mark.parametrize("boundary", ["circle", "square"])
 def test_convex_map_one_to_one(grid_mesh, kind, boundary):
-    uv = jp.convex_map(grid_mesh, weights=kind, boundary=boundary)
+    """Theorem 1 on the grid: its conditions hold (except the harmonic weights' sign) and the map
+    has no flipped face and no boundary overlap.  On the square the corners sit on the grid's
+    corners, so that no dividing edge lies along a side (the default corners put one there:
+    see test_theorem1_catches_dividing_edge_on_square_side)."""
+    corners = grid_corner_positions(grid_mesh) if boundary == "square" else None
+    uv = jp.convex_map(grid_mesh, weights=kind, boundary=boundary, corners=corners)
     rep = jp.distortion(grid_mesh, uv, weights=kind)
-    if kind != "harmonic":
-        assert rep.theorem1.positive_weights and rep.theorem1.convex_boundary
-    if rep.theorem1.holds:
-        assert rep.flips == 0
-    if boundary == "circle":
-        assert rep.flips == 0
+    cert = rep.theorem1
+    assert cert.convex_boundary and cert.dividing_edges_ok and not cert.dividing_edges_on_boundary
+    if kind == "harmonic":
+        # Cotangent weights are negative across obtuse angles: Theorem 1 does not apply, and the
+        # certificate must say so rather than promise a one-to-one map.
+        assert cert.positive_weights is False and cert.negative_weights > 0 and not cert.holds
+    else:
+        assert cert.positive_weights is True and cert.negative_weights == 0 and cert.holds
+    assert rep.flips == 0 and rep.degenerate == 0 and rep.boundary_overlaps == 0
+    assert np.all(np.asarray(jp.geometry.signed_areas(uv, grid_mesh.faces)) > 0)
+    if kind == "harmonic":
+        # Without Theorem 1's guarantee, pin the map itself: the discrete harmonic map is
+        # libigl's harmonic function (cotangent Laplacian) with the same boundary values.
+        igl = pytest.importorskip("igl")
+        loop = grid_mesh.topology.boundary_loops[0]
+        U = np.asarray(uv)
+        ref = igl.harmonic(np.asarray(grid_mesh.vertices, np.float64), np.asarray(grid_mesh.faces, np.int64),
+                           loop.astype(np.int64), np.ascontiguousarray(U[loop]), 1)
+        np.testing.assert_allclose(U, ref, atol=1e-10)
+
+
+def test_harmonic_one_to_one_when_cotangent_weights_positive():
+    """With no obtuse angle pair (all cotangent weights positive) the harmonic map is a convex
+    combination map and Theorem 1 applies: the certificate holds and nothing flips."""
+    mesh = jp.shapes.disk(5)                   # flat, near-equilateral rings: all cot weights > 0
+    for boundary in ["circle", "square"]:
+        uv = jp.convex_map(mesh, weights="harmonic", boundary=boundary)
+        rep = jp.distortion(mesh, uv, weights="harmonic")
+        assert rep.theorem1.positive_weights is True and rep.theorem1.holds, boundary
+        assert rep.flips == 0 and rep.boundary_overlaps == 0, boundary
 
 
 def test_theorem1_catches_dividing_edge_on_square_side(grid_mesh):
-    # The grid's corner triangles have a dividing edge whose ends land on one side of the square.
-    uv = jp.convex_map(grid_mesh, weights="uniform", boundary="square")
-    rep = jp.distortion(grid_mesh, uv, weights="uniform")
-    assert not rep.theorem1.dividing_edges_ok and not rep.theorem1.holds
-    assert rep.flips >= 1 or rep.degenerate >= 1
+    """With the square's corners at quarter arc length, one corner misses the grid corner 11: its
+    triangle's diagonal (10, 23) lies along a side, the certificate names exactly that edge, and
+    exactly the triangle it cuts off (10, 11, 23) collapses onto the side; no other face flips."""
+    assert grid_mesh.topology.dividing_edges.tolist() == [[10, 23], [120, 133]]
+    for kind in jp.weights.KINDS:
+        uv = jp.convex_map(grid_mesh, weights=kind, boundary="square")
+        rep = jp.distortion(grid_mesh, uv, weights=kind)
+        assert rep.theorem1.convex_boundary and not rep.theorem1.dividing_edges_ok, kind
+        assert not rep.theorem1.holds and rep.theorem1.dividing_edges_on_boundary == [(10, 23)], kind
+        areas = np.asarray(jp.geometry.signed_areas(uv, grid_mesh.faces))
+        ear = np.flatnonzero(np.all(np.isin(grid_mesh.faces, [10, 11, 23]), axis=1))
+        assert ear.size == 1, kind
+        assert abs(areas[ear[0]]) <= 1e-12, kind               # collapsed onto the square's side
+        assert np.all(np.delete(areas, ear) > 0), kind          # and nothing else flips
+        assert rep.boundary_overlaps == 0, kind
 
 
 def test_interior_vertices_are_convex_combinations(grid_mesh):
