@@ -35,11 +35,8 @@ def _mesh_arrays(refine: int):
 
     import jaxparam as jp
 
-    mesh = jp.load(DATA)
-    V, F = np.asarray(mesh.vertices), mesh.faces
-    for _ in range(refine):
-        V, F = jp.shapes._split(V, F)
-    return V, F
+    mesh = jp.shapes.refine(jp.load(DATA), refine)
+    return np.asarray(mesh.vertices), mesh.faces
 
 
 def run_one(method: str, refine: int) -> dict:

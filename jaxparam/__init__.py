@@ -16,21 +16,23 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from . import errors, tol, topology, geometry, boundary, weights, sparse  # noqa: E402
+from . import errors, tol, options, topology, triangles, subdivision, io, disk  # noqa: E402
+from . import geometry, boundary, weights, sparse, combination  # noqa: E402
 from . import linear, metrics, shapes, energies, optimize, points, fitting, plot  # noqa: E402
 from .errors import (  # noqa: E402
     DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
     PointCloudError, SolverError, TopologyError,
 )
-from .mesh import TriMesh, load, save  # noqa: E402
+from .mesh import TriMesh  # noqa: E402
+from .io import load, save  # noqa: E402
 from .linear import convex_map, least_squares_map  # noqa: E402
 from .metrics import DistortionReport, distortion  # noqa: E402
 from .energies import ENERGIES, Energy, energy  # noqa: E402
 from .optimize import MinimizeResult, minimize  # noqa: E402
-from .points import load_points, meshless_map, reconstruct_surface  # noqa: E402
+from .points import Reconstruction, load_points, meshless_map, reconstruct_surface  # noqa: E402
 from .fitting import fit_surface  # noqa: E402
 from . import wavelets  # noqa: E402
-from .remesh import remesh  # noqa: E402  (the function; the module is jaxparam.remesh in sys.modules)
+from .remesh import Remesh, remesh  # noqa: E402  (the function; the module is jaxparam.remesh in sys.modules)
 from . import manifold  # noqa: E402
 from .manifold import manifold_map  # noqa: E402
 
@@ -44,4 +46,5 @@ __all__ = [
     "metrics", "shapes", "energies", "optimize", "energy", "Energy", "ENERGIES", "minimize",
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
     "fitting", "fit_surface", "plot", "remesh", "wavelets", "manifold", "manifold_map",
+    "options", "triangles", "subdivision", "io", "disk", "combination", "Reconstruction", "Remesh",
 ]
