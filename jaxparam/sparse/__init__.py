@@ -20,10 +20,11 @@ matrices, else SuperLU.  A backend that fails to factorize hands the matrix
 to SuperLU; every solve checks its relative residual against
 :data:`jaxparam.tol.SOLVE_RESIDUAL` and is redone once with SuperLU above it.
 
-:func:`solve` is differentiable in JAX: forward ``A x = b`` with a cached
-factorization; backward one solve with ``A^T`` (the same factorization) for
-the adjoint ``lam``, then ``d b = lam`` and ``d A_ij = -lam_i . x_j`` on A's
-pattern.
+:func:`solve` is differentiable in JAX, in both modes from one definition (a
+``jax.lax.custom_linear_solve``): forward ``A x = b`` with a cached factorization;
+forward mode ``dx = A^{-1} (db - dA x)``; reverse mode one solve with ``A^T`` (the same
+factorization) for the adjoint ``lam``, then ``d b = lam`` and ``d A_ij = -lam_i . x_j``
+on A's pattern; higher orders alike; ``jax.vmap`` batches its host callback.
 
 Modules, one job each: :mod:`~jaxparam.sparse.counters` (:data:`stats`),
 :mod:`~jaxparam.sparse.pattern` (:class:`Pattern` and its uid registry),
