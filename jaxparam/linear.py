@@ -98,6 +98,10 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
     V = jnp.asarray(work.vertices, dtype=jnp.float64)
     loop = t.boundary_loops[0]
     shape, user_uv = _boundary_key(boundary, loop.size)
+    if shape == "plane":
+        # Refuse a loop that projects to no simple polygon now, on concrete positions (the
+        # boundary map itself runs inside a jit, where values are tracers).
+        bmap.check_plane_boundary(work.vertices[loop], loop)
     corners = None if corners is None else tuple(int(c) for c in corners)
     if t.interior.size == 0:
         # No interior vertex: the map is the boundary map itself.
