@@ -31,6 +31,12 @@ module each:
    result, a :class:`jaxparam.remesh.Remesh`, has subdivision connectivity and feeds
    :mod:`jaxparam.wavelets`.
 
+**Differentiation.**  :func:`manifold_map` runs eagerly (its discrete stages need concrete
+positions; traced vertices raise :class:`~jaxparam.MeshError`), and
+:meth:`ManifoldParameterization.with_vertices` re-solves its charts for new positions of the
+input's vertices with every discrete choice held fixed (:class:`ManifoldStructure`), so
+``jax.grad(lambda V: loss(param.with_vertices(V).remesh(2).mesh.vertices))(V0)`` works.
+
 Steps 1 and 2 are sequential by nature (one collapse, one path at a time) and run as
 Python loops over collapses and paths; everything per vertex or per face is vectorized.
 """
@@ -38,6 +44,6 @@ from __future__ import annotations
 
 from .charts import REFERENCE
 from .decimate import decimate
-from .parameterization import ManifoldParameterization, manifold_map
+from .parameterization import ManifoldParameterization, ManifoldStructure, manifold_map
 
-__all__ = ["REFERENCE", "decimate", "ManifoldParameterization", "manifold_map"]
+__all__ = ["REFERENCE", "decimate", "ManifoldParameterization", "ManifoldStructure", "manifold_map"]

@@ -1,7 +1,7 @@
 """Step 4 of :mod:`jaxparam.manifold`: the parameterization object, its remesh, and :func:`manifold_map`."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import jax
 import jax.numpy as jnp
@@ -14,11 +14,11 @@ from ..mesh import TriMesh
 from ..remesh import Remesh
 from ..subdivision import dyadic_hierarchy, split_corner_values
 from ..triangles import locate
-from .charts import REFERENCE, charts, surface_triangles
+from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .paths import refine_all, room_for_paths, trace_paths
+from .paths import apply_steps, refine_all, room_for_paths, trace_paths
 
-__all__ = ["ManifoldParameterization", "manifold_map"]
+__all__ = ["ManifoldParameterization", "ManifoldStructure", "manifold_map"]
 
 
 class _Static(tuple):
@@ -34,6 +34,53 @@ class _Static(tuple):
 
 
 _CHART_FIELDS = ("base_vertices", "base_faces", "region", "face_uv", "vertex_face", "vertex_bary")
+_STATIC_FIELDS = ("base_vertices", "base_faces", "region", "vertex_face", "structure")
+
+
+@dataclass(frozen=True, eq=False)
+class ManifoldStructure:
+    """The discrete choices of a :func:`manifold_map` (numpy), held fixed by
+    :meth:`ManifoldParameterization.with_vertices`.
+
+    **Fields:** ``n_input`` the input mesh's vertex count; ``steps`` the refinements from the
+    input to the parameterized mesh (each new vertex the mean of its parents, see
+    :func:`~jaxparam.manifold.paths.apply_steps`); ``topology`` the parameterized mesh's;
+    ``charts`` the :class:`~jaxparam.manifold.charts.ChartSystem` (paths, fixed vertices,
+    the solve's pattern); ``located_uv (m, 3, 2)`` the chart coordinates :meth:`lift`
+    locates points in (those of the parameterization :func:`manifold_map` returned)."""
+
+    n_input: int
+    steps: tuple
+    topology: topo.Topology
+    charts: ChartSystem
+    located_uv: np.ndarray | None = None
+
+
+def _barycentric(T, p):
+    """Barycentric coordinates ``(k, 3)`` of ``p (k, 2)`` in triangles ``T (k, 3, 2)`` (JAX)."""
+    a, b, c = T[:, 0], T[:, 1], T[:, 2]
+    det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    l1 = ((b[:, 0] - p[:, 0]) * (c[:, 1] - p[:, 1]) - (b[:, 1] - p[:, 1]) * (c[:, 0] - p[:, 0])) / det
+    l2 = ((c[:, 0] - p[:, 0]) * (a[:, 1] - p[:, 1]) - (c[:, 1] - p[:, 1]) * (a[:, 0] - p[:, 0])) / det
+    return jnp.stack([l1, l2, 1.0 - l1 - l2], axis=1)
+
+
+def _traced(x) -> bool:
+    return isinstance(x, jax.core.Tracer)
+
+
+def _solve(S: ManifoldStructure, vertices, name):
+    """The parameterized mesh and its charts at input positions ``vertices`` (JAX, traced or
+    not; numpy out when concrete)."""
+    V = jnp.asarray(vertices, jnp.float64)
+    Vw = apply_steps(V, S.steps)
+    concrete = not _traced(Vw)
+    W = TriMesh(np.asarray(Vw) if concrete else Vw, S.topology.faces, S.topology,
+                validate=False, name=name)
+    face_uv, vbary = chart_values(S.charts, W)
+    if concrete:
+        face_uv, vbary = np.asarray(face_uv), np.asarray(vbary)
+    return W, face_uv, vbary
 
 
 @jax.tree_util.register_pytree_node_class
@@ -49,10 +96,14 @@ class ManifoldParameterization:
     - ``face_uv (m, 3, 2)``: each mesh face's corners in its base face's chart (the
       reference triangle :data:`~jaxparam.manifold.REFERENCE`);
     - ``vertex_face (n,)``, ``vertex_bary (n, 3)``: a base face of each vertex and its
-      barycentric coordinates there (``phi^{-1}`` of the vertex).
+      barycentric coordinates there (``phi^{-1}`` of the vertex);
+    - ``structure``: the :class:`ManifoldStructure` (the discrete choices) that
+      :meth:`with_vertices` re-solves the charts with; ``None`` for one built by hand.
 
-    A JAX pytree whose leaf is ``mesh`` (its vertex positions): the chart data are concrete
-    numpy, static data, so :meth:`lift` is differentiable in the mesh's positions.
+    A JAX pytree whose leaves are ``mesh`` (its vertex positions), ``face_uv`` and
+    ``vertex_bary``; the combinatorial data are concrete numpy, static data.  :meth:`lift`
+    and :meth:`remesh` are differentiable in the leaves, and :meth:`with_vertices` in the
+    input mesh's positions (the route for ``jax.grad``: see there).
     """
 
     mesh: TriMesh
@@ -62,17 +113,64 @@ class ManifoldParameterization:
     face_uv: np.ndarray
     vertex_face: np.ndarray
     vertex_bary: np.ndarray
+    structure: ManifoldStructure | None = None
 
     def tree_flatten(self):
-        return (self.mesh,), _Static(getattr(self, f) for f in _CHART_FIELDS)
+        return (self.mesh, self.face_uv, self.vertex_bary), _Static(getattr(self, f) for f in _STATIC_FIELDS)
 
     @classmethod
     def tree_unflatten(cls, static, children):
-        return cls(children[0], *static)
+        mesh, face_uv, vertex_bary = children
+        base_vertices, base_faces, region, vertex_face, structure = static
+        return cls(mesh, base_vertices, base_faces, region, face_uv, vertex_face, vertex_bary, structure)
+
+    def with_vertices(self, vertices) -> "ManifoldParameterization":
+        """The same parameterization, discrete choices held fixed, for new positions of the
+        input mesh's vertices: differentiable in ``vertices``.
+
+        **Arguments:** ``vertices (n, 3)``: positions of the vertices of the mesh given to
+        :func:`manifold_map` (not of the refined ``self.mesh``); numpy, JAX arrays or tracers.
+
+        **Held fixed** (computed once, by :func:`manifold_map`, from concrete positions): the
+        base domain (which vertices are base vertices, the base faces), the refinement of the
+        mesh that made room for the paths (its new vertices stay the midpoints and centroids
+        of the same input vertices: a fixed linear map of ``vertices``), the traced surface
+        edges (paths) and surface triangles (``region``), the charts' connectivity (which
+        vertices are fixed on which side of the reference triangle, the pattern of the solve)
+        and, in :meth:`lift` and :meth:`remesh`, the mesh face each chart point is located in.
+        **Recomputed** (JAX): the refined positions, the chord-length parameters of the path
+        vertices, the convex-combination weights and the solve for the free vertices
+        (:mod:`jaxparam.combination`, the differentiable sparse route under tracing), hence
+        ``face_uv``, ``vertex_bary`` and the lifted/remeshed positions.  For positions far
+        from those the structure was computed at (faces flipping in their charts), compute a
+        new :func:`manifold_map` instead; nothing here checks.
+
+        ``param.with_vertices(V0)``, ``V0`` the positions :func:`manifold_map` saw, gives
+        ``param`` again exactly.  Example::
+
+            base, param = jp.manifold_map(mesh, base_faces=40)      # eager: the combinatorics
+            V0 = jnp.asarray(mesh.vertices)
+            g = jax.grad(lambda V: loss(param.with_vertices(V).remesh(levels=2).mesh.vertices))(V0)
+        """
+        S = self.structure
+        if S is None:
+            raise MeshError("ManifoldParameterization.with_vertices: this parameterization has no "
+                            "structure (it was not made by jp.manifold_map); make it with "
+                            "jp.manifold_map(mesh) first.")
+        shape = tuple(getattr(vertices, "shape", np.shape(vertices)))
+        if shape != (S.n_input, 3):
+            raise MeshError(f"ManifoldParameterization.with_vertices: vertices must have shape "
+                            f"({S.n_input}, 3), the mesh given to manifold_map, got {shape}.")
+        W, face_uv, vbary = _solve(S, vertices, self.mesh.name)
+        return ManifoldParameterization(W, self.base_vertices, self.base_faces, self.region, face_uv,
+                                        self.vertex_face, vbary, S)
 
     def remesh(self, levels: int = 3) -> Remesh:
         """The ``levels``-fold dyadic refinement of ``T^0`` mapped onto the surface (§9,
         Fig. 26 (c)), each vertex through its base triangle's chart (eq. (11)).
+
+        Differentiable in the parameterization's leaves (its mesh's positions and charts),
+        so ``param.with_vertices(V).remesh(levels)`` is differentiable in ``V``.
 
         **Returns:** a :class:`~jaxparam.remesh.Remesh`: ``.mesh`` a closed :class:`TriMesh`
         with subdivision connectivity whose vertices lie on the surface (no UVs: a closed
@@ -95,18 +193,26 @@ class ManifoldParameterization:
         return Remesh(TriMesh(X, F, validate=False, name="manifold_remesh"), H)
 
     def lift(self, region: np.ndarray, uv: np.ndarray):
-        """Surface points ``(k, 3)`` of chart points ``uv (k, 2)`` in base faces ``region (k,)``.
+        """Surface points ``(k, 3)`` of chart points ``uv (k, 2)`` (concrete) in base faces
+        ``region (k,)``.
 
         Every chart is the reference triangle; the charts are laid out side by side in one
-        plane so a single point location serves all of them."""
+        plane so a single point location serves all of them.  The location (which mesh face
+        holds each point) uses ``structure.located_uv``, the charts :func:`manifold_map`
+        computed (a discrete choice, held fixed); the barycentric coordinates there come from
+        ``face_uv`` and the points from ``mesh.vertices``, both differentiable."""
+        S = self.structure
+        ref = S.located_uv if S is not None and S.located_uv is not None else np.asarray(self.face_uv)
         m0 = self.base_faces.shape[0]
         cols = int(np.ceil(np.sqrt(m0)))
         offset = 2.0 * np.stack([np.arange(m0) % cols, np.arange(m0) // cols], 1)
-        corners = (self.face_uv + offset[self.region][:, None, :]).reshape(-1, 2)
+        corners = (ref + offset[self.region][:, None, :]).reshape(-1, 2)
         tri = np.arange(corners.shape[0]).reshape(-1, 3)
-        face, b = locate(corners, tri, np.asarray(uv) + offset[np.asarray(region)])
+        uv = np.asarray(uv, np.float64)
+        face, _ = locate(corners, tri, uv + offset[np.asarray(region)])
+        b = _barycentric(jnp.asarray(self.face_uv)[face], jnp.asarray(uv))
         idx = jnp.asarray(self.mesh.faces[face])
-        return jnp.einsum("kc,kcd->kd", jnp.asarray(b), jnp.asarray(self.mesh.vertices)[idx])
+        return jnp.einsum("kc,kcd->kd", b, jnp.asarray(self.mesh.vertices)[idx])
 
 
 def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_value"):
@@ -120,11 +226,27 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     mesh vertices (``param.base_vertices``), and a :class:`ManifoldParameterization`
     (``param.remesh(levels)`` remeshes with subdivision connectivity).
 
+    **Differentiation.**  The discrete stages (decimation, refinement, path tracing, surface
+    triangles, the charts' connectivity) need concrete positions, so ``manifold_map`` itself
+    is not traced: call it eagerly, then differentiate
+    :meth:`ManifoldParameterization.with_vertices`, which re-solves the charts (and so the
+    remesh) for new positions with every discrete choice held fixed.  Under
+    ``jax.grad``/``jit``/``vmap`` (traced vertices) it raises :class:`MeshError` naming that
+    route.
+
     Example::
 
         base, param = jp.manifold_map(mesh, base_faces=100)
         semi = param.remesh(3)
+        # d(remesh) / d(mesh positions), the combinatorics fixed:
+        g = jax.grad(lambda V: loss(param.with_vertices(V).remesh(2).mesh.vertices))(V0)
     """
+    if _traced(mesh.vertices):
+        raise MeshError("manifold_map: the mesh's vertices are traced (under jax.grad, jit or vmap), "
+                        "but the base domain, surface paths and charts' connectivity need concrete "
+                        "positions. Compute `base, param = jp.manifold_map(mesh, base_faces)` "
+                        "eagerly, then differentiate `param.with_vertices(V)` (it re-solves the "
+                        "charts for positions V with the discrete choices held fixed).")
     t = mesh.topology
     if not t.is_closed:
         raise TopologyError(f"manifold_map: the mesh has {len(t.boundary_loops)} boundary loops; "
@@ -145,18 +267,24 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     if base_topo.genus != t.genus:                      # the link condition should prevent it
         raise SolverError(f"manifold_map: the base domain has genus {base_topo.genus}, the mesh "
                           f"{t.genus}.", stage="decimate")
-    W = room_for_paths(mesh, kept, base_topo, int(base_faces))
+    steps: list = []
+    W = room_for_paths(mesh, kept, base_topo, int(base_faces), steps)
     # A path can find its corridor walled off by earlier ones where the surface is narrow
     # in vertices: refine everywhere (4x the vertices, the surface unchanged) and retrace.
     for attempt in range(3):
         try:
             paths = trace_paths(W, kept, base_topo)
             region = surface_triangles(W, kept, F0, base_topo, paths)
-            face_uv, vface, vbary = charts(W, kept, F0, base_topo, paths, region, weights)
+            _, vface, _, system = charts(W, kept, F0, base_topo, paths, region, weights)
             break
         except SolverError:
             if attempt == 2 or W.n_vertices > 100_000:     # bounded work when it fails
                 raise
-            W = refine_all(W)
+            W = refine_all(W, steps)
+    # The positions and charts returned are those with_vertices computes (the same code),
+    # so param.with_vertices(mesh.vertices) reproduces param exactly.
+    S = ManifoldStructure(mesh.n_vertices, tuple(steps), W.topology, system)
+    W, face_uv, vbary = _solve(S, np.asarray(mesh.vertices), W.name)
+    S = replace(S, located_uv=face_uv)
     base = TriMesh(np.asarray(mesh.vertices)[kept], F0, base_topo, validate=False, name="base_domain")
-    return base, ManifoldParameterization(W, kept, F0, region, face_uv, vface, vbary)
+    return base, ManifoldParameterization(W, kept, F0, region, face_uv, vface, vbary, S)

@@ -20,6 +20,7 @@ Dijkstra inside.
 """
 from __future__ import annotations
 
+import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
@@ -27,9 +28,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from .. import topology as topo
 from ..errors import SolverError
 from ..mesh import TriMesh
-from ..subdivision import midpoint_refine
+from ..subdivision import dyadic_refine
 
-__all__ = ["room_for_paths", "refine_all", "trace_paths"]
+__all__ = ["room_for_paths", "refine_all", "apply_steps", "trace_paths"]
 
 
 def _ring_position(t: topo.Topology, v: int) -> dict:
@@ -63,13 +64,18 @@ def _sector(order: list, traced: dict, i: int, pos: dict, k_ring: int):
 
 
 def room_for_paths(mesh: TriMesh, base_ids: np.ndarray, base_topo: topo.Topology,
-                   base_faces: int) -> TriMesh:
+                   base_faces: int, steps: list | None = None) -> TriMesh:
     """``mesh`` refined, without moving its surface (Fig. 24), until the paths of the base
     domain ``base_topo`` (over the mesh vertices ``base_ids``, ``base_faces`` faces) have room:
     1-to-3 splits of the faces around each base vertex until it has at least ``2 k + 2``
     neighbours for its ``k`` base edges (each split doubles its degree), then one 1-to-4
     split of every face (so a base vertex's neighbours are edge midpoints, none a dead end),
-    and another while there are fewer than 40 vertices per base face."""
+    and another while there are fewer than 40 vertices per base face.
+
+    ``steps``: a list to which each refinement is appended as its new vertices' parents, an
+    ``(k, p) int`` array (each new vertex the mean of its ``p`` parents), so
+    :func:`apply_steps` recomputes the refined positions from the input's (a fixed linear
+    map: differentiable)."""
     W = mesh
     need = 2 * np.diff(base_topo.ring_ptr) + 2
     for _ in range(3):
@@ -81,21 +87,41 @@ def room_for_paths(mesh: TriMesh, base_ids: np.ndarray, base_topo: topo.Topology
         split = np.isin(F, short).any(axis=1)
         x = V.shape[0] + np.arange(int(split.sum()))
         a, b, c = F[split].T
+        if steps is not None:
+            steps.append(F[split].copy())
         V = np.concatenate([V, V[F[split]].mean(1)])
         F = np.concatenate([F[~split], np.stack([a, b, x], 1), np.stack([b, c, x], 1),
                             np.stack([c, a, x], 1)])
         W = TriMesh(V, F, validate=False, name=mesh.name)
-    W = refine_all(W)
+    W = refine_all(W, steps)
     while W.n_vertices < 40 * base_faces:
-        W = refine_all(W)
+        W = refine_all(W, steps)
     return W
 
 
-def refine_all(W: TriMesh) -> TriMesh:
-    """Every face split 1-to-4 at its edge midpoints (:func:`jaxparam.subdivision.midpoint_refine`):
-    the same surface, new vertices last."""
-    V, F = midpoint_refine(np.asarray(W.vertices), W.faces)
+def refine_all(W: TriMesh, steps: list | None = None) -> TriMesh:
+    """Every face split 1-to-4 at its edge midpoints (as :func:`jaxparam.subdivision.midpoint_refine`):
+    the same surface, new vertices last.  ``steps`` as in :func:`room_for_paths`."""
+    V = np.asarray(W.vertices)
+    F, parents, _ = dyadic_refine(W.faces, V.shape[0])
+    if steps is not None:
+        steps.append(np.asarray(parents, np.int64)[:, :2].copy())
+    V = np.concatenate([V, 0.5 * (V[parents[:, 0]] + V[parents[:, 1]])])
     return TriMesh(V, F, validate=False, name=W.name)
+
+
+def apply_steps(V, steps):
+    """The refined positions ``(n_W, 3)`` from the input's ``V (n, 3)`` (numpy or JAX, traced
+    or not): each step appends the means of its parents' positions, as
+    :func:`room_for_paths` and :func:`refine_all` do."""
+    xp = np if isinstance(V, np.ndarray) else jnp
+    for parents in steps:
+        if parents.shape[1] == 2:
+            new = 0.5 * (V[parents[:, 0]] + V[parents[:, 1]])
+        else:
+            new = V[parents].mean(1)
+        V = xp.concatenate([V, new])
+    return V
 
 
 def _tracing_order(base_topo: topo.Topology, length: np.ndarray) -> np.ndarray:
