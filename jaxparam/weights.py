@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .options import choose
 from .errors import MeshError
 from .geometry import safe_norm
 
@@ -216,8 +217,7 @@ def entry_weights(vertices, topology, kind: str):
     **Returns:** ``(w, symmetric)``: ``w: (k,)`` in :func:`ring_entries` order and
     whether ``w`` is a symmetric spring weight (``w_vw = w_wv``).
     """
-    if kind not in KINDS:
-        raise MeshError(f"weights: unknown weights {kind!r}; use one of {KINDS}.")
+    kind = choose(kind, KINDS, what="weights", where="weights")
     R = ring_entries(topology)
     if R.entry.size == 0:
         raise MeshError("weights: the mesh has no interior vertices; nothing to solve for.")

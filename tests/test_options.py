@@ -1,4 +1,5 @@
 """jaxparam.options: one vocabulary of option names, and defaults read from signatures."""
+import numpy as np
 import pytest
 
 import jaxparam as jp
@@ -47,3 +48,20 @@ def test_default_of_reads_the_signature():
     assert default_of(f, "c", fallback=7) == 7
     with pytest.raises(TypeError, match=r"has no parameter 'a' with a default"):
         default_of(f, "a")
+
+
+def test_every_api_function_takes_both_spellings():
+    """Issue 11 item 10: the hyphenated and the underscore name give the same result."""
+    import jaxparam as jp
+
+    m = jp.shapes.disk(4, seed=1, height=0.3)
+    P = np.asarray(jp.shapes.graph_surface(8).vertices)
+    pairs = [
+        lambda s: jp.convex_map(m, weights=s("shape_preserving")),
+        lambda s: jp.weights.entry_weights(m.vertices, m.topology, s("mean_value"))[0],
+        lambda s: jp.meshless_map(P, weights=s("inverse_distance"))[0],
+        lambda s: jp.fit_surface(m, jp.convex_map(m), kind=s("clough_tocher")).sample(5).vertices,
+    ]
+    for f in pairs:
+        a, b = f(lambda n: n), f(lambda n: n.replace("_", "-"))
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import topology as topo
 from .. import weights as wts
+from ..options import choose
 from ..errors import MeshError, SolverError, TopologyError
 from ..mesh import TriMesh
 from ..remesh import Remesh
@@ -260,8 +261,7 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
         raise MeshError(f"manifold_map: base_faces must be an even integer in [{least}, "
                         f"{t.n_faces}) for this genus-{t.genus} mesh of {t.n_faces} faces, got "
                         f"{base_faces!r}.")
-    if weights not in wts.KINDS:
-        raise MeshError(f"manifold_map: unknown weights {weights!r}; use one of {wts.KINDS}.")
+    weights = choose(weights, wts.KINDS, what="weights", where="manifold_map")
     kept, F0 = decimate(mesh, int(base_faces))
     base_topo = topo.build(F0, kept.size, where="manifold_map")
     if base_topo.genus != t.genus:                      # the link condition should prevent it

@@ -13,6 +13,7 @@ from scipy.sparse.csgraph import breadth_first_order
 from .. import boundary as bmap
 from .. import combination as comb
 from .. import weights as wts
+from ..options import choose
 from ..errors import PointCloudError, first_few
 from .boundary import detect_boundary
 from .defaults import GAP, K, MAX_SLOPE
@@ -79,17 +80,17 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
     return (P, kept, index) if return_index else (P, kept)
 
 
-def check_map_options(where: str, weights, boundary, spacing) -> None:
-    """Raise :class:`PointCloudError` (naming ``where``) unless ``weights`` is one of
-    :data:`WEIGHTS`, ``boundary`` ``"circle"`` or ``"square"`` and ``spacing`` one of
+def check_map_options(where: str, weights, boundary, spacing) -> tuple[str, str, str]:
+    """The canonical ``(weights, boundary, spacing)`` (either spelling accepted), or a
+    :class:`PointCloudError` (naming ``where``) unless ``weights`` is one of :data:`WEIGHTS`,
+    ``boundary`` ``"circle"`` or ``"square"`` and ``spacing`` one of
     :data:`jaxparam.boundary.SPACINGS`."""
-    if weights not in WEIGHTS:
-        raise PointCloudError(f"{where}: unknown weights {weights!r}; use one of {WEIGHTS}.")
+    weights = choose(weights, WEIGHTS, what="weights", where=where, error=PointCloudError)
     if not isinstance(boundary, str) or boundary not in ("circle", "square"):
         raise PointCloudError(f"{where}: boundary must be 'circle' or 'square', got {boundary!r}; "
                               "to choose the boundary points pass boundary_indices.")
-    if spacing not in bmap.SPACINGS:
-        raise PointCloudError(f"{where}: unknown spacing {spacing!r}; use one of {bmap.SPACINGS}.")
+    spacing = choose(spacing, bmap.SPACINGS, what="spacing", where=where, error=PointCloudError)
+    return weights, boundary, spacing
 
 
 def check_boundary_indices(where: str, indices, n: int, index: np.ndarray | None = None) -> np.ndarray:
@@ -148,7 +149,7 @@ def meshless_map(points, *, k: int = K, weights: str = "inverse_distance", bound
 
         uv, bnd = jp.meshless_map(points, k=10, weights="inverse_distance")
     """
-    check_map_options("meshless_map", weights, boundary, spacing)
+    weights, boundary, spacing = check_map_options("meshless_map", weights, boundary, spacing)
     sym = symmetric_solve(weights, symmetric, radius)
     if isinstance(points, jax.core.Tracer):
         if graph is None or boundary_indices is None:

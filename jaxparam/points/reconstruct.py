@@ -85,7 +85,7 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     """
     if unknown:
         raise PointCloudError(f"reconstruct_surface: unknown options {sorted(unknown)}.")
-    check_map_options("reconstruct_surface", weights, boundary, spacing)
+    weights, boundary, spacing = check_map_options("reconstruct_surface", weights, boundary, spacing)
     with reuse_freed_memory(np.shape(points)[0] if np.ndim(points) == 2 else 0):
         return _reconstruct(points, k=k, radius=radius, symmetric=symmetric, weights=weights,
                             boundary=boundary, spacing=spacing, gap=gap, user_bnd=boundary_indices,
