@@ -94,7 +94,12 @@ def ring_entries(topology) -> RingEntries:
 def _corner_geometry(V, F):
     """Per corner ``3 f + c`` of every face: the angle there, its cotangent, and the length
     of the half-edge leaving it (corner c -> c + 1).  Computed once per face, so that
-    every one-ring quantity below is a gather (survey §4–5 need only these)."""
+    every one-ring quantity below is a gather (survey §4–5 need only these).
+
+    The corner angles are unsigned, ``arctan2(|e x f|, e . f)``: smooth on every triangle
+    with a nonzero area (angles in ``(0, pi)``), kinked only on a flat one (0 or ``pi``),
+    which :class:`~jaxparam.TriMesh` refuses on construction
+    (:class:`~jaxparam.DegenerateFaceError`, unless ``validate=False``)."""
     P = V[F]                                            # (m, 3, 3)
     e = jnp.roll(P, -1, axis=1) - P                     # half-edge c -> c+1
     f = jnp.roll(P, 1, axis=1) - P                      # c -> c-1
@@ -134,6 +139,15 @@ def weights_from_angles(kind: str, angle, prev_angle, length, row, row_start, ro
     **Returns:** ``(k,)`` unnormalized weights: ``uniform`` 1, ``inverse_distance`` ``1 / r_j``,
     ``mean_value`` Floater's ``(tan(delta_{j-1}/2) + tan(delta_j/2)) / r_j`` (2003),
     ``shape_preserving`` :func:`shape_preserving_weights` (rows summing to 1).
+
+    **Where it is not differentiable.**  ``uniform`` and ``inverse_distance`` are smooth
+    (away from ``r_j = 0``).  ``mean_value`` is as smooth as its angles: on point fans
+    (:func:`fan_weights`) an angle is unsigned and kinks at 0 (two consecutive neighbours on
+    one ray from the centre, ``delta = |t| / 2``-like in a displacement ``t`` off the ray), where
+    JAX returns the mean of the two one-sided derivatives; at ``delta = pi`` (the centre on
+    the segment between two consecutive neighbours) it has a pole, ``tan(pi/2)`` about
+    ``1.6e16`` in floating point, with a finite JAX derivative.  ``shape_preserving``: see
+    :func:`shape_preserving_weights` (``tests/test_weight_kinks.py`` checks each case).
     """
     if kind == "uniform":
         return jnp.ones_like(length)
@@ -158,6 +172,22 @@ def shape_preserving_weights(delta, r, row, row_start, row_end, degree, *, n_row
     sum(delta)``.  Step 2: for each k, the ray from ``p = 0`` opposite ``p_k``
     crosses the edge ``[p_l, p_{l+1}]``; the barycentric coordinates of ``p``
     in ``[p_k, p_l, p_{l+1}]`` are averaged over k (eq. (7)).
+
+    **Kinks (the method is piecewise).**  The weights are continuous but only piecewise
+    smooth: the edge ``[p_l, p_{l+1}]`` changes where the ray opposite ``p_k`` passes through
+    a neighbour ``p_l`` (``phi_l = phi_k + pi``).  The edge is chosen on stopped-gradient
+    angles, so JAX differentiates the branch the search picks: ``phi_l <= phi_k + pi``
+    (mod ``2 pi``), i.e. ``l`` for ``k`` but ``k``'s predecessor side for ``l``.  At an exact
+    opposite pair the two averaged terms (k's and l's) take the two triangles one each,
+    and JAX's derivative is the *mean* of the two one-sided derivatives; when rounding puts
+    ``phi_l`` a little off ``phi_k + pi`` it is the derivative of the side it falls on.
+    On point fans the unsigned angles add the kinks of :func:`weights_from_angles` (a
+    neighbour pair on one ray, angle 0; the centre on a segment, angle ``pi``), and these
+    are not mean-valued: at angle ``pi`` JAX returns neither side, and where the ray
+    opposite a neighbour passes through two neighbours on one ray the weights *jump* (the
+    search takes the later of the two, a displacement to one side the earlier one);
+    JAX's derivative there is finite and is that of neither side.  Such fans are
+    degenerate (no strict star); ``tests/test_weight_kinks.py`` pins each case.
     """
     total = jax.ops.segment_sum(delta, row, num_segments=n_rows)
     scale = (2 * jnp.pi / total)[row]
@@ -332,6 +362,15 @@ def fan_weights(points, entries: FanEntries, kind: str):
     lengths (differentiable in ``points (N, 3)``, which may be traced).
 
     **Returns:** ``(k,)`` in ``entries`` order (rows need not sum to 1).
+
+    **Kinks.**  The angle between neighbour directions is the *unsigned* 3D angle
+    ``arctan2(|d_j x d_{j+1}|, d_j . d_{j+1})`` (a point fan has no face normal to sign
+    it): it is ``|signed angle|`` near 0 and ``pi - |.|`` near ``pi``, so ``mean_value`` and
+    ``shape_preserving`` are not differentiable where two consecutive neighbours are
+    collinear with the centre (same ray: angle 0; opposite rays: ``pi``).  There JAX takes
+    ``d|x|/dx = 0`` (the norm of the cross product has a zero gradient at 0), so the angle's
+    derivative is the mean of its one-sided ones, 0.  What each kind does at such a fan is
+    in :func:`weights_from_angles` and :func:`shape_preserving_weights`.
     """
     if kind not in FAN_KINDS:
         raise MeshError(f"weights: unknown fan weights {kind!r}; use one of {FAN_KINDS}.")
@@ -343,6 +382,7 @@ def fan_weights(points, entries: FanEntries, kind: str):
 
 
 def _angle(a, b):
+    # Unsigned: kinks where a, b are parallel (0) or antiparallel (pi); see fan_weights.
     return jnp.arctan2(safe_norm(jnp.cross(a, b)), jnp.sum(a * b, -1))
 
 

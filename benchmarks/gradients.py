@@ -1,0 +1,142 @@
+"""Gradient time over forward time of each public differentiable function, on camelhead.
+
+For every function ``f(V)`` of the vertex positions (issue 12, item 7): the forward time
+(``jax.jit(f)``, compiled, median of ``--repeats`` calls) and the gradient time
+(``jax.jit(jax.grad(lambda V: sum(f(V)**2)))``, compiled, median of the same) and their
+ratio (the goal is <= 2).  A function that cannot be put under ``jax.jit`` is timed eagerly
+(marked ``eager``); one whose gradient fails is reported as ``failed: <reason>``.
+
+Usage::
+
+    python benchmarks/gradients.py [--mesh camelhead.off] [--repeats 5] [--only NAME ...]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(os.environ.get("JAXPARAM_DATA", "/work/shared/data/meshes"))
+
+
+def cases(mesh):
+    """``name -> f(V)`` for every differentiable public function, on ``mesh``."""
+    import jax.numpy as jnp
+    import jaxparam as jp
+
+    out = {}
+    for w in jp.weights.KINDS:
+        out[f"convex_map {w}"] = (lambda w: lambda V: jp.convex_map(
+            mesh.with_vertices(V), weights=w, boundary="circle"))(w)
+    out["least_squares_map"] = lambda V: jp.least_squares_map(mesh.with_vertices(V))
+    out["minimize symmetric_dirichlet (newton, fixed bnd)"] = lambda V: jp.minimize(
+        mesh.with_vertices(V), "symmetric_dirichlet", verbose=False).uv
+
+    # Meshless map on the mesh's vertices: the neighbour graph and the boundary are topology,
+    # computed once from the concrete points and passed in (needed under jax.grad).
+    P0 = np.asarray(mesh.vertices)
+    graph = jp.points.point_graph(P0)
+    _, bnd = jp.meshless_map(P0, graph=graph)
+    bnd = np.asarray(bnd)
+    for w in ("inverse_distance", "mean_value", "shape_preserving"):
+        out[f"meshless_map {w}"] = (lambda w: lambda V: jp.meshless_map(
+            V, graph=graph, boundary_indices=bnd, weights=w)[0])(w)
+
+    # Energies of a fixed UV as functions of the 3D positions (the total E of eq. (10)).
+    uv0 = jnp.asarray(jp.convex_map(mesh, weights="mean_value"))
+    for e in ("symmetric_dirichlet", "mips", "arap", "conformal"):
+        out[f"energy {e} (fixed uv)"] = (lambda e: lambda V: jp.ENERGIES[e](
+            mesh.with_vertices(V), uv0))(e)
+    return out
+
+
+def timed(fn, V, repeats):
+    import jax
+
+    def once():
+        t = time.perf_counter()
+        jax.block_until_ready(fn(V))
+        return time.perf_counter() - t
+
+    first = once()                                      # compile (or first eager run)
+    return first, statistics.median(once() for _ in range(repeats))
+
+
+def measure(f, V, repeats):
+    """``(forward_s, gradient_s, mode)``; raises on failure of either."""
+    import jax
+    import jax.numpy as jnp
+
+    def loss(V):
+        y = f(V)
+        return jnp.nansum(jnp.square(y))
+
+    mode = "jit"
+    try:
+        fwd = jax.jit(f)
+        grad = jax.jit(jax.grad(loss))
+        _, tf = timed(fwd, V, repeats)
+        _, tg = timed(grad, V, repeats)
+    except Exception as exc:                            # noqa: BLE001 - fall back to eager
+        if "Tracer" not in type(exc).__name__ and "Concretization" not in str(exc) \
+                and "TracerArrayConversion" not in str(exc):
+            raise
+        mode = "eager"
+        _, tf = timed(f, V, repeats)
+        _, tg = timed(jax.grad(loss), V, repeats)
+    g = np.asarray(jax.grad(loss)(V)) if mode == "eager" else np.asarray(grad(V))
+    if not np.all(np.isfinite(g)):
+        raise FloatingPointError(f"non-finite gradient ({np.sum(~np.isfinite(g))} entries)")
+    return tf, tg, mode
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--mesh", default=str(DATA / "camelhead.off"))
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--only", nargs="*", help="substrings of the case names to run")
+    args = ap.parse_args()
+
+    import jax
+    import jax.numpy as jnp
+    import jaxparam as jp
+
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = float("nan")
+    print(f"machine: {platform.machine()} {platform.processor() or ''}, {os.cpu_count()} cores, "
+          f"JAX {jax.__version__} on {jax.default_backend()}, Python {platform.python_version()}, "
+          f"load average at start {load:.1f}")
+    mesh = jp.load(args.mesh)
+    print(f"mesh: {Path(args.mesh).name}, {mesh.n_vertices} vertices, {mesh.n_faces} faces; "
+          f"median of {args.repeats} compiled calls")
+    V = jnp.asarray(mesh.vertices, dtype=jnp.float64)
+    print(f"| function | forward s | gradient s | ratio |")
+    print(f"|---|---:|---:|---:|")
+    for name, f in cases(mesh).items():
+        if args.only and not any(s in name for s in args.only):
+            continue
+        try:
+            tf, tg, mode = measure(f, V, args.repeats)
+        except Exception as exc:                        # noqa: BLE001 - report and move on
+            msg = str(exc).strip().splitlines()
+            reason = f"{type(exc).__name__}: {msg[0][:120] if msg else ''}"
+            print(f"| {name} | failed: {reason} | | |", flush=True)
+            if os.environ.get("GRADIENTS_TRACEBACK"):
+                traceback.print_exc()
+            continue
+        tag = "" if mode == "jit" else " (eager)"
+        print(f"| {name}{tag} | {tf:.4f} | {tg:.4f} | {tg / tf:.2f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
