@@ -15,20 +15,59 @@ Names (as in the design): ``condition_2`` (E1), ``mips`` (E2),
 """
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import geometry as geo
 from .errors import MeshError
 
-__all__ = ["Energy", "energy", "ENERGIES", "get", "mips_prop2", "total"]
+__all__ = ["Energy", "Densities", "energy", "ENERGIES", "get", "mips_prop2", "total",
+           "params_equal", "captures_tracer"]
 
 
-@dataclass(frozen=True)
+class Densities(NamedTuple):
+    """An energy's three functions with its parameters bound (:meth:`Energy.densities`):
+    ``density(frame, q)``, ``of_J(J)`` or ``None``, ``of_sv(s1, s2)`` or ``None``."""
+
+    density: Callable
+    of_J: Callable | None
+    of_sv: Callable | None
+
+
+def _leaf_equal(a, b) -> bool:
+    if a is b:
+        return True
+    if isinstance(a, jax.core.Tracer) or isinstance(b, jax.core.Tracer):
+        return False          # traced values: equal only when they are the same tracer
+    try:
+        a, b = np.asarray(a), np.asarray(b)
+    except Exception:         # not array-like: Python equality
+        return bool(a == b)
+    return a.shape == b.shape and a.dtype == b.dtype and bool(np.array_equal(a, b, equal_nan=True))
+
+
+def params_equal(a, b) -> bool:
+    """Whether two parameter pytrees are equal: the same structure, and leaves equal by value
+    (shape, dtype and entries; NaN equals NaN); a JAX tracer equals only itself."""
+    la, ta = jax.tree_util.tree_flatten(a)
+    lb, tb = jax.tree_util.tree_flatten(b)
+    return ta == tb and all(_leaf_equal(x, y) for x, y in zip(la, lb))
+
+
+def _bind(fn, params):
+    """``fn`` with ``params`` as its last argument (``None`` stays ``None``)."""
+    if fn is None:
+        return None
+    return lambda *args: fn(*args, params)
+
+
+@dataclass(frozen=True, eq=False)
 class Energy:
     """A per-triangle energy density and how to treat it.
 
@@ -36,7 +75,8 @@ class Energy:
 
     - ``name``: shown in progress bars, reports and error messages.
     - ``density``: ``density(frame (3, 2), q (3, 2)) -> scalar``, the energy of one
-      triangle (``frame`` from :func:`jaxparam.geometry.local_frames`, ``q`` its UVs).
+      triangle (``frame`` from :func:`jaxparam.geometry.local_frames`, ``q`` its UVs);
+      ``density(frame, q, params)`` when ``parametric``.
     - ``scale_invariant``: unchanged when the UVs are scaled (E1–E4, MIPS, angle,
       conformal); a free-boundary minimization then keeps the start's area.
     - ``barrier``: ``+inf`` where a triangle is inverted.
@@ -46,13 +86,21 @@ class Energy:
     - ``of_sv``: ``of_sv(s1, s2) -> scalar`` when the density is a barrier function of
       the singular values (``s1 >= s2 > 0``), else ``None``; the minimizer then projects
       its Hessian in closed form (analytic eigensystems).
+    - ``parametric``: the three functions take the energy's parameters as a last
+      argument (``of_J(J, params)``, ``of_sv(s1, s2, params)``); :meth:`densities` binds
+      them.
+    - ``params``: the parameters, any JAX pytree (arrays, floats, tuples, dicts: leaves
+      may be JAX tracers, e.g. under ``jax.grad``); ``None`` when not ``parametric``.
 
-    Equality and hash are by value, field by field, and every field is compared: two
-    energies built from the same function object with the same name and flags are
-    equal, so ``jp.energy(f) == jp.energy(f)``.  :func:`jaxparam.minimize`'s kernels take
-    the energy as a static argument of ``jax.jit``, so equal energies share compiled
-    code, and energies from different functions (compared by identity, as Python
-    compares functions) never do.
+    Equality is by value, field by field: two energies built from the same function object
+    with the same name, flags and equal parameters are equal, so ``jp.energy(f) ==
+    jp.energy(f)``; parameters compare by :func:`params_equal` (a tracer equals only
+    itself).  The hash leaves the parameters out (equal energies still hash equal), and
+    :func:`jaxparam.minimize`'s kernels take :attr:`static` (the energy without its
+    parameters) as a static argument of ``jax.jit`` and the parameters as a dynamic
+    one: equal energies share compiled code, so do energies that differ only in their
+    parameter values (traced or not), and energies from different functions (compared
+    by identity, as Python compares functions) never do.
     """
 
     name: str
@@ -61,6 +109,38 @@ class Energy:
     barrier: bool = True
     of_J: Callable | None = field(default=None, repr=False)
     of_sv: Callable | None = field(default=None, repr=False)
+    parametric: bool = False
+    params: Any = field(default=None, repr=False)
+
+    def _key(self) -> tuple:
+        return (self.name, self.density, self.scale_invariant, self.barrier, self.of_J,
+                self.of_sv, self.parametric)
+
+    def __eq__(self, other):
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        return self._key() == other._key() and params_equal(self.params, other.params)
+
+    def __hash__(self):
+        return hash(self._key())
+
+    @property
+    def static(self) -> "Energy":
+        """This energy without its parameters (``params=None``): what ``jax.jit`` kernels
+        take as a static argument, next to the parameters as a dynamic one."""
+        return self if self.params is None else dataclasses.replace(self, params=None)
+
+    def with_params(self, params) -> "Energy":
+        """The same energy with other parameters (e.g. traced ones)."""
+        return dataclasses.replace(self, params=params)
+
+    def densities(self, params=None) -> Densities:
+        """The density, ``of_J`` and ``of_sv`` with ``params`` (default: :attr:`params`)
+        bound, each taking its usual arguments (``(frame, q)``, ``J``, ``(s1, s2)``)."""
+        if not self.parametric:
+            return Densities(self.density, self.of_J, self.of_sv)
+        p = self.params if params is None else params
+        return Densities(_bind(self.density, p), _bind(self.of_J, p), _bind(self.of_sv, p))
 
     def __call__(self, mesh, uv):
         """The mesh energy of ``uv: (n, 2)``: area-weighted mean of the density."""
@@ -69,10 +149,11 @@ class Energy:
                      jnp.asarray(uv)[mesh.faces])
 
 
-def total(en: Energy, frames, areas, Q):
+def total(en: Energy, frames, areas, Q, params=None):
     """``sum_T |T| f(frame_T, q_T) / sum_T |T|`` for per-face ``frames (m, 3, 2)``,
-    ``areas (m,)`` and UV corners ``Q (m, 3, 2)``."""
-    dens = jax.vmap(en.density)(frames, Q)
+    ``areas (m,)`` and UV corners ``Q (m, 3, 2)``; ``params``: the energy's parameters
+    (default ``en.params``)."""
+    dens = jax.vmap(en.densities(params).density)(frames, Q)
     return jnp.sum(areas * dens) / jnp.sum(areas)
 
 
@@ -90,8 +171,8 @@ class _OfJacobian:
 
     of_J: Callable
 
-    def __call__(self, frame, q):
-        return self.of_J(geo.jacobian_from_frame(frame, q))
+    def __call__(self, frame, q, *params):
+        return self.of_J(geo.jacobian_from_frame(frame, q), *params)
 
 
 @dataclass(frozen=True)
@@ -102,14 +183,14 @@ class _SingularValueForm:
     fn: Callable
     barrier: bool
 
-    def __call__(self, J):
+    def __call__(self, J, *params):
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         s1, s2 = geo.singular_values(J)
         if not self.barrier:
-            return self.fn(s1, jnp.abs(s2))
+            return self.fn(s1, jnp.abs(s2), *params)
         s2_safe = jnp.where(det > 0, s2, 1.0)
         s1_safe = jnp.where(det > 0, s1, 1.0)
-        return _barrier(det, self.fn(s1_safe, s2_safe))
+        return _barrier(det, self.fn(s1_safe, s2_safe, *params))
 
 
 @dataclass(frozen=True)
@@ -119,25 +200,29 @@ class _JacobianForm:
     fn: Callable
     barrier: bool
 
-    def __call__(self, J):
+    def __call__(self, J, *params):
         if not self.barrier:
-            return self.fn(J)
+            return self.fn(J, *params)
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         J_safe = jnp.where(det > 0, J, jnp.eye(2))
-        return _barrier(det, self.fn(J_safe))
+        return _barrier(det, self.fn(J_safe, *params))
 
 
-def _from_sv(name, fn, scale_invariant=False, *, barrier=True) -> Energy:
-    """An Energy from a function of the singular values (s1 >= s2 > 0 when unflipped)."""
+def _from_sv(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
+             params=None) -> Energy:
+    """An Energy from a function of the singular values (s1 >= s2 > 0 when unflipped);
+    ``fn(s1, s2, params)`` when ``parametric``."""
     of_J = _SingularValueForm(fn, barrier)
     return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
-                  of_sv=fn if barrier else None)
+                  of_sv=fn if barrier else None, parametric=parametric, params=params)
 
 
-def _from_J(name, fn, scale_invariant=False, *, barrier=True) -> Energy:
-    """An Energy from a function of the 2x2 Jacobian."""
+def _from_J(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
+            params=None) -> Energy:
+    """An Energy from a function of the 2x2 Jacobian; ``fn(J, params)`` when ``parametric``."""
     of_J = _JacobianForm(fn, barrier)
-    return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J)
+    return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
+                  parametric=parametric, params=params)
 
 
 def _angle_density(frame, q):
@@ -183,6 +268,38 @@ ENERGIES: dict[str, Energy] = {
 }
 
 
+def _captured(fn, depth: int = 0):
+    """The values a function reaches without being passed them: its closure cells and
+    defaults, a ``functools.partial``'s arguments, the wrapped function of our wrappers."""
+    if depth > 4 or fn is None:
+        return []
+    out = []
+    for attr in ("of_J", "fn", "func"):             # _OfJacobian, the forms, partial
+        inner = getattr(fn, attr, None)
+        if callable(inner) and inner is not fn:
+            out += _captured(inner, depth + 1)
+    args, kw = getattr(fn, "args", None), getattr(fn, "keywords", None)
+    out += list(args) if isinstance(args, tuple) else []
+    out += list(kw.values()) if isinstance(kw, dict) else []
+    for cell in getattr(fn, "__closure__", None) or ():
+        try:
+            v = cell.cell_contents
+        except ValueError:      # an empty cell
+            continue
+        out += _captured(v, depth + 1) if callable(v) else [v]
+    out += list(getattr(fn, "__defaults__", None) or ())
+    return out
+
+
+def captures_tracer(en: Energy) -> bool:
+    """Whether the energy's functions close over a JAX tracer (e.g. a parameter under
+    ``jax.grad`` captured by a ``lambda``): the compiled kernels cannot take it; it must be
+    passed as ``jp.energy(f, params)``."""
+    vals = _captured(en.density) + _captured(en.of_J) + _captured(en.of_sv)
+    return any(isinstance(leaf, jax.core.Tracer) for v in vals
+               for leaf in jax.tree_util.tree_leaves(v))
+
+
 def get(e) -> Energy:
     """An :class:`Energy` from a name (hyphens or underscores) or an Energy."""
     if isinstance(e, Energy):
@@ -198,28 +315,44 @@ def get(e) -> Energy:
     raise MeshError(f"energy: expected a name or a jp.energy(...), got {type(e).__name__}.")
 
 
-def energy(fn: Callable, *, name: str | None = None, scale_invariant: bool = False,
-           barrier: bool = True) -> Energy:
-    """A user energy from ``f(s1, s2)`` (singular values) or ``f(J)`` (the 2x2 Jacobian).
+_NO_PARAMS = object()
 
-    The number of positional parameters decides which.  The energy is
-    ``+inf`` on inverted triangles when ``barrier`` (the default), and works
-    with every solver of :func:`jaxparam.minimize`: JAX supplies its
+
+def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
+           scale_invariant: bool = False, barrier: bool = True) -> Energy:
+    """A user energy from ``f(s1, s2)`` (singular values) or ``f(J)`` (the 2x2 Jacobian),
+    optionally with parameters: ``f(s1, s2, params)`` or ``f(J, params)``.
+
+    The number of positional parameters decides which (one more when ``params`` is
+    given).  The energy is ``+inf`` on inverted triangles when ``barrier`` (the
+    default), and works with every solver of :func:`jaxparam.minimize`: JAX supplies its
     gradient and Hessian.
+
+    ``params``: any JAX pytree (a float, an array, a tuple or dict of them), passed to
+    ``f`` as its last argument.  They are data, not part of the compiled code: energies
+    that differ only in their parameters share :func:`jaxparam.minimize`'s compiled
+    kernels, and the parameters may be traced, so ``jax.grad`` of a function of
+    ``minimize(mesh, jp.energy(f, p)).uv`` with respect to ``p`` is the implicit
+    gradient of the optimum (:mod:`jaxparam.optimize.implicit`).
 
     Example::
 
         e = jp.energy(lambda s1, s2: s1 / s2 + s2 / s1)       # MIPS, written by hand
         res = jp.minimize(mesh, e)
+        w = jp.energy(lambda s1, s2, a: s1 ** 2 + s2 ** 2 + a * (s1 ** -2 + s2 ** -2), 2.0)
+        jax.grad(lambda a: jnp.sum(jp.minimize(mesh, jp.energy(f, a)).uv ** 2))(2.0)
     """
+    parametric = params is not _NO_PARAMS
     try:
-        params = [p for p in inspect.signature(fn).parameters.values()
-                  if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) and p.default is p.empty]
+        args = [p for p in inspect.signature(fn).parameters.values()
+                if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) and p.default is p.empty]
     except (TypeError, ValueError):
-        params = [None]
-    n = len(params)
+        args = [None] * (2 if parametric else 1)
+    n = len(args) - (1 if parametric else 0)
     if n not in (1, 2):
-        raise MeshError(f"energy: a user energy takes (s1, s2) or (J), got a function of {n} "
+        want = "(s1, s2, params) or (J, params)" if parametric else "(s1, s2) or (J)"
+        raise MeshError(f"energy: a user energy takes {want}, got a function of {len(args)} "
                         "arguments.")
     make = _from_sv if n == 2 else _from_J
-    return make(name or getattr(fn, "__name__", "user"), fn, scale_invariant, barrier=barrier)
+    return make(name or getattr(fn, "__name__", "user"), fn, scale_invariant, barrier=barrier,
+                parametric=parametric, params=params if parametric else None)

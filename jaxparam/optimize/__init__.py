@@ -26,8 +26,12 @@ A solver of your own subclasses :class:`Solver` (``run(problem, stop) -> SolveRe
 or :class:`HostLoopSolver` (only ``step``); add it to :data:`SOLVERS` to use it by name.
 
 The result is differentiable: ``jax.grad`` of a scalar of ``minimize(...).uv``
-with respect to the vertex positions uses implicit differentiation at the
-optimum (one solve with the true, unprojected Hessian).
+with respect to the vertex positions, to ``init`` or to an energy's parameters
+(``jp.energy(f, params)``) uses implicit differentiation at the optimum (one solve
+with the true, unprojected Hessian), through the fixed boundary too (the default
+start moves with the vertices); differentiating a run that did not converge warns
+:class:`UnconvergedGradientWarning` (``strict=True``: raises).  ``jax.vmap`` and
+``jax.jit`` work through ``minimize`` (:mod:`~jaxparam.optimize.implicit`).
 
 Modules: ``driver`` (minimize, MinimizeResult, start check), ``problem`` (free DOFs,
 jitted kernels, Hessian pattern), ``base`` (stopping rules, results, the host loop),
@@ -35,7 +39,7 @@ jitted kernels, Hessian pattern), ``base`` (stopping rules, results, the host lo
 ``search`` (flip-free Armijo), ``implicit`` (implicit gradients), ``solvers`` (the
 registry).
 """
-from .base import HostLoopSolver, SolveResult, Solver, StopRules
+from .base import HostLoopSolver, SolveResult, Solver, StopRules, UnconvergedGradientWarning
 from .driver import MinimizeResult, minimize
 from .newton import Newton
 from .problem import Problem
@@ -44,4 +48,4 @@ from .solvers import SOLVERS, solver_from
 
 __all__ = ["MinimizeResult", "minimize", "SOLVERS", "FlipFreeDescent", "Solver",
            "HostLoopSolver", "SolveResult", "StopRules", "Problem", "Newton", "LBFGS", "BFGS",
-           "JaxoptLBFGS", "OptimistixSolver", "solver_from"]
+           "JaxoptLBFGS", "OptimistixSolver", "solver_from", "UnconvergedGradientWarning"]

@@ -19,7 +19,18 @@ from ..errors import SolverError
 from .problem import Problem
 
 __all__ = ["StopRules", "SolveResult", "Step", "Solver", "HostLoopSolver", "Monitor",
-           "start_point", "progress_bar", "REASONS"]
+           "start_point", "progress_bar", "REASONS", "UnconvergedGradientWarning"]
+
+
+class UnconvergedGradientWarning(UserWarning):
+    """Issued when a :func:`jaxparam.minimize` that did not converge is differentiated.
+
+    The gradient is then that of the stopping point: the implicit-function formula
+    evaluated there as if it were the optimum (exact only at a stationary point).
+    ``minimize(..., strict=True)`` raises :class:`~jaxparam.errors.SolverError` (stage
+    ``"gradient"``) instead; ``warnings.simplefilter("error", UnconvergedGradientWarning)``
+    turns every such warning into an error.
+    """
 
 #: The ``reason`` strings of :class:`SolveResult`, by the rule that stopped the run.
 REASONS = {

@@ -1,5 +1,6 @@
 """:func:`minimize` and :class:`MinimizeResult`: argument checks, the start, and the hand-off
-to a solver (or to :func:`~jaxparam.optimize.implicit.minimize_traced` under ``jax.grad``)."""
+to a solver (or to :func:`~jaxparam.optimize.implicit.minimize_traced` when an input is traced:
+``jax.grad``, ``jax.vmap``, ``jax.jit``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -14,7 +15,7 @@ from .. import metrics
 from .. import tol
 from ..errors import MeshError, SolverError
 from .base import Solver, StopRules
-from .implicit import minimize_traced
+from .implicit import is_traced, minimize_traced
 from .problem import Problem
 from .solvers import solver_from
 
@@ -25,13 +26,15 @@ __all__ = ["MinimizeResult", "minimize", "check_start"]
 class MinimizeResult:
     """What :func:`minimize` returns.
 
-    **Fields:** ``uv (n, 2)``; ``energy`` (final, area-weighted mean density);
+    **Fields:** ``uv (n, 2)`` (a JAX array, differentiable, when an input was traced);
+    ``energy`` (final, area-weighted mean density);
     ``iterations`` (accepted steps); ``converged``; ``history`` (energy after each
     iteration, the start first); ``seconds`` (wall time, compilation included);
     ``reason`` (why it stopped); ``flips`` (always 0 from an injective start);
     ``boundary_overlaps`` (free boundary: crossings of the boundary with itself);
     ``solver`` (the solver's registry name); ``times`` (seconds since the start at each
-    entry of ``history``).
+    entry of ``history``).  Under ``jax.jit`` and ``jax.vmap`` the scalars are JAX
+    arrays and the lists empty (:func:`minimize` says which).
     """
 
     uv: object
@@ -59,18 +62,29 @@ def check_start(mesh, uv0, where: str = "minimize") -> None:
             "jp.convex_map(mesh) (positive weights, convex boundary).", stage="init")
 
 
+def _concrete(a):
+    """``a`` as a host array when its value is known now (a constant, or a tracer of
+    ``jax.grad`` whose primal is concrete), else ``None`` (under ``jax.jit`` or
+    ``jax.vmap``)."""
+    try:
+        return np.asarray(jax.lax.stop_gradient(a), np.float64)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
+
+
 def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bool = False,
              solver: str | Solver = "newton", max_iters: int = 200,
              energy_rtol: float = tol.ENERGY_RTOL, grad_rtol: float = tol.GRAD_RTOL,
-             max_seconds: float | None = None, verbose: bool = True) -> MinimizeResult:
+             max_seconds: float | None = None, verbose: bool = True,
+             strict: bool = False) -> MinimizeResult:
     """Minimize a distortion energy over the UVs without ever inverting a triangle.
 
     **Arguments:**
 
-    - ``mesh``: a disk :class:`~jaxparam.TriMesh` (its vertices may be a JAX
-      tracer under ``jax.grad``: the optimum is then differentiated implicitly).
+    - ``mesh``: a disk :class:`~jaxparam.TriMesh` (its vertices may be JAX tracers: see
+      *Transformations*).
     - ``energy``: a name (``"symmetric_dirichlet"``, ``"mips"``, ``"angle"``, ...) or
-      ``jp.energy(f)``.
+      ``jp.energy(f)`` (``jp.energy(f, params)`` for one with parameters).
     - ``init``: ``(n, 2)`` one-to-one start; default ``convex_map(mesh)``
       (shape-preserving weights, circle).  With ``free_boundary`` and a
       scale-dependent energy the start is rescaled to the 3D area.
@@ -81,11 +95,33 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
     - ``max_iters``, ``energy_rtol``, ``grad_rtol``, ``max_seconds``: stopping rules
       (:class:`jaxparam.optimize.StopRules`).
     - ``verbose``: a progress bar for runs longer than a second.
+    - ``strict``: refuse to differentiate a run that did not converge (a
+      :class:`SolverError`, stage ``"gradient"``, when the gradient is taken) instead of
+      warning :class:`~jaxparam.optimize.UnconvergedGradientWarning`.
 
     **Returns:** a :class:`MinimizeResult`.
 
-    Raises :class:`SolverError` (stage ``"init"``) when the start has a flipped triangle,
-    :class:`MeshError` for an unknown solver or a bad argument.
+    **Transformations.**  ``jax.grad`` (and ``jax.vjp``, ``jax.jacrev``) of a function of
+    ``res.uv`` with respect to the vertex positions, to ``init`` or to the energy's
+    parameters is the implicit gradient of the optimum (:mod:`jaxparam.optimize.implicit`):
+    one solve with the true Hessian, through the energy's dependence on the inputs and
+    through the fixed boundary's (the default start ``convex_map(mesh)`` moves with the
+    vertices; an explicit ``init``'s boundary rows are the fixed UVs).  The free rows of
+    ``init`` do not move a converged optimum: their gradient is 0.  With a free boundary
+    the optimum is unique only up to a rigid motion (and a scale, fixed by the
+    normalization, for a scale-invariant energy): the gradient is exact for losses
+    invariant under rigid motions of the UVs.  Differentiating a run that did not converge
+    warns (the gradient is that of the stopping point) or, with ``strict``, raises.
+    ``jax.vmap`` (e.g. over vertex positions with the same faces) runs one minimization
+    per batch element; under ``jax.jit`` and ``jax.vmap`` ``energy``, ``iterations``,
+    ``converged`` and ``flips`` of the result are JAX arrays, ``history`` and ``times``
+    are empty, ``reason`` is ``""`` and ``seconds`` is NaN.
+
+    Raises :class:`SolverError` (stage ``"init"``) when the start has a flipped triangle
+    (under ``jax.jit`` or ``jax.vmap`` the start is checked in the forward callback, and the
+    error reaches the caller wrapped in a ``jax.errors.JaxRuntimeError``),
+    :class:`MeshError` for an unknown solver, a bad argument or an energy that closes over
+    a JAX tracer (pass such values as ``jp.energy(f, params)``).
 
     Example::
 
@@ -95,38 +131,32 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
     from ..linear import convex_map, disk_check
 
     en = en_mod.get(energy)
+    if en_mod.captures_tracer(en):
+        raise MeshError(
+            f"minimize: the energy {en.name!r} closes over a traced value (a JAX tracer, e.g. a "
+            "parameter under jax.grad captured by a lambda), which its compiled kernels cannot "
+            "take; pass it as a parameter instead: jp.energy(lambda s1, s2, p: ..., params=p), "
+            "and jax.grad reaches it through the implicit gradient.")
     solver = solver_from(solver)
     if max_iters < 0:
         raise MeshError(f"minimize: max_iters must be >= 0, got {max_iters}.")
     disk_check(mesh, "minimize")
-    traced = isinstance(mesh.vertices, jax.core.Tracer)
-    Vc = mesh.vertices
+    stop = StopRules(max_iters=max_iters, energy_rtol=energy_rtol, grad_rtol=grad_rtol,
+                     max_seconds=max_seconds)
+    if is_traced((mesh.vertices, init, en.params)):
+        return _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, strict)
     if init is None:
-        init = convex_map(mesh.with_vertices(jax.lax.stop_gradient(Vc)) if traced else mesh)
-    uv0 = np.asarray(jax.lax.stop_gradient(jnp.asarray(init)), np.float64)
+        init = convex_map(mesh)
+    uv0 = np.asarray(init, np.float64)
     if uv0.shape != (mesh.n_vertices, 2):
         raise MeshError(f"minimize: init must have shape ({mesh.n_vertices}, 2), got {uv0.shape}.")
     check_start(mesh, uv0)
     if free_boundary and not en.scale_invariant:
-        V = np.asarray(jax.lax.stop_gradient(jnp.asarray(Vc)))
+        V = np.asarray(mesh.vertices)
         a3 = float(np.sum(np.asarray(geo.face_areas(V, mesh.faces))))
         auv = float(np.sum(np.asarray(geo.signed_areas(jnp.asarray(np.nan_to_num(uv0)), mesh.faces))))
         c = np.nanmean(uv0, axis=0)
         uv0 = (uv0 - c) * np.sqrt(a3 / auv)
-    stop = StopRules(max_iters=max_iters, energy_rtol=energy_rtol, grad_rtol=grad_rtol,
-                     max_seconds=max_seconds)
-
-    if traced:
-        uv, forward = minimize_traced(mesh, en, uv0, free_boundary, solver, stop, verbose)
-        res = forward.result
-        if res is None:       # the forward callback has not run (e.g. under jax.jit)
-            return MinimizeResult(uv=uv, energy=float("nan"), iterations=0, converged=False,
-                                  history=[], seconds=0.0, reason="", flips=0,
-                                  boundary_overlaps=0, solver=solver.name, times=[])
-        return MinimizeResult(uv=uv, energy=res.energy, iterations=res.iterations,
-                              converged=res.converged, history=res.history, seconds=res.seconds,
-                              reason=res.reason, flips=forward.flips, boundary_overlaps=0,
-                              solver=solver.name, times=res.times)
     prob = Problem(mesh, en, free_boundary, uv0)
     res = solver.run(prob, stop, verbose=verbose)
     uv = np.array(prob.uv(res.x))
@@ -136,3 +166,43 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
                           reason=res.reason, flips=prob.flipped(res.x),
                           boundary_overlaps=metrics.boundary_overlaps(mesh, uv) if free_boundary else 0,
                           solver=solver.name, times=res.times)
+
+
+def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, strict):
+    """:func:`minimize` when the vertices, ``init`` or the energy's parameters are JAX
+    tracers: the start as a JAX array (the default one differentiable in the vertices),
+    then :func:`~jaxparam.optimize.implicit.minimize_traced`."""
+    from ..linear import convex_map
+
+    if init is None:
+        init = convex_map(mesh)
+    init = jnp.asarray(init, jnp.float64)
+    if init.shape != (mesh.n_vertices, 2):
+        raise MeshError(f"minimize: init must have shape ({mesh.n_vertices}, 2), got {init.shape}.")
+    known = _concrete(init)
+    if known is not None:
+        check_start(mesh, known)
+    if free_boundary and not en.scale_invariant:
+        V = jnp.asarray(mesh.vertices, jnp.float64)
+        a3 = jnp.sum(geo.face_areas(V, mesh.faces))
+        auv = jnp.sum(geo.signed_areas(jnp.nan_to_num(init), mesh.faces))
+        init = (init - jnp.nanmean(init, axis=0, keepdims=True)) * jnp.sqrt(a3 / auv)
+    base = jnp.where(jnp.isnan(init), 0.0, init)
+    uv, info, runs = minimize_traced(mesh, en, base, free_boundary, solver, stop, verbose,
+                                     strict=strict, checked=known is not None)
+    run = runs.close()
+    if run is not None:       # the forward callback ran once, now (an eager jax.grad)
+        res = run.result
+        overlaps = 0
+        if free_boundary:
+            uvh = np.array(run.problem.uv(res.x))
+            uvh[~mesh.topology.referenced] = np.nan
+            overlaps = metrics.boundary_overlaps(mesh, uvh)
+        return MinimizeResult(uv=uv, energy=res.energy, iterations=res.iterations,
+                              converged=res.converged, history=res.history, seconds=res.seconds,
+                              reason=res.reason, flips=run.flips, boundary_overlaps=overlaps,
+                              solver=solver.name, times=res.times)
+    # under jax.jit (the callback has not run yet) or jax.vmap (it ran once per element)
+    return MinimizeResult(uv=uv, energy=info.energy, iterations=info.iterations,
+                          converged=info.converged, history=[], seconds=float("nan"), reason="",
+                          flips=info.flips, boundary_overlaps=0, solver=solver.name, times=[])

@@ -68,30 +68,32 @@ def psd_project(H):
 
 
 @functools.partial(jax.jit, static_argnames=("en", "project"))
-def face_hessians(x, base, free, F, frames, areas, D, *, en, project):
+def face_hessians(x, base, free, F, frames, areas, params, D, *, en, project):
     """``(m, 6, 6)`` Hessians of each face's weighted density in its corners' UVs.
 
     For densities of the Jacobian alone (``en.of_J``), ``J`` is linear in the UVs,
     ``vec J = D q`` (``D`` from :func:`jaxparam.optimize.problem.jacobian_maps`), so
     ``H_q = D^T H_J D`` with the 4x4 ``H_J``: projecting ``H_J`` to PSD projects ``H_q``
     too, at a fraction of the cost; with ``en.of_sv`` the projection is analytic
-    (:func:`projected_sv_hessian`).  Non-finite entries are zeroed.
+    (:func:`projected_sv_hessian`).  Non-finite entries are zeroed.  ``params``: the
+    energy's parameters (``en`` is static, without them).
     """
     Q = uv_of(x, base, free)[F].reshape(-1, 6)
     w = areas / jnp.sum(areas)
-    if en.of_J is not None:
+    fns = en.densities(params)
+    if fns.of_J is not None:
         J = jnp.einsum("mij,mj->mi", D, Q)
-        if project and en.of_sv is not None:
-            HJ = jax.vmap(lambda JJ: projected_sv_hessian(JJ.reshape(2, 2), en.of_sv))(J)
+        if project and fns.of_sv is not None:
+            HJ = jax.vmap(lambda JJ: projected_sv_hessian(JJ.reshape(2, 2), fns.of_sv))(J)
         else:
-            HJ = jax.vmap(jax.hessian(lambda JJ: en.of_J(JJ.reshape(2, 2))))(J)
+            HJ = jax.vmap(jax.hessian(lambda JJ: fns.of_J(JJ.reshape(2, 2))))(J)
             if project:
                 HJ = psd_project(jnp.where(jnp.isfinite(HJ), HJ, 0.0))
         HJ = jnp.where(jnp.isfinite(HJ), HJ, 0.0)
         H = jnp.einsum("mai,mab,mbj->mij", D, HJ, D)
     else:
         def h(frame, q):
-            return jax.hessian(lambda qq: en.density(frame, qq.reshape(3, 2)))(q)
+            return jax.hessian(lambda qq: fns.density(frame, qq.reshape(3, 2)))(q)
         H = jax.vmap(h)(frames, Q)
         H = jnp.where(jnp.isfinite(H), H, 0.0)
         if project:

@@ -3,8 +3,10 @@ flip count, the per-face Jacobian maps and the Hessian's sparsity pattern.
 
 The unknowns are ``x``, the free vertices' UVs flattened to ``(2 k,)``; fixed vertices
 keep their start UVs (``Problem.base``).  The kernels here are module-level ``jax.jit``
-functions with the :class:`~jaxparam.Energy` as a static argument, so every problem of the
-same shapes and an equal energy shares their compiled code.
+functions with the :class:`~jaxparam.Energy` as a static argument (:attr:`Energy.static
+<jaxparam.Energy.static>`, without its parameters) and the energy's parameters as a dynamic
+one, so every problem of the same shapes and an equal energy shares their compiled code,
+whatever the parameter values.
 """
 from __future__ import annotations
 
@@ -20,8 +22,19 @@ from .. import geometry as geo
 from .. import sparse
 from ..errors import SolverError
 
-__all__ = ["Problem", "HessianPattern", "uv_of", "energy_value", "energy_value_and_grad",
-           "count_flipped", "max_step_along", "jacobian_maps"]
+__all__ = ["Problem", "HessianPattern", "uv_of", "energy_at", "energy_value",
+           "energy_value_and_grad", "count_flipped", "max_step_along", "jacobian_maps",
+           "free_vertices", "normalized"]
+
+
+def free_vertices(topology, free_boundary: bool) -> np.ndarray:
+    """The free vertices of a minimization, ascending: the referenced ones with a free
+    boundary, the referenced interior ones otherwise (no vertex is pinned to remove the
+    rigid motions of a free boundary: the solvers and the implicit gradient handle that
+    null space)."""
+    t = topology
+    mask = t.referenced & (np.ones(t.n_vertices, bool) if free_boundary else ~t.is_boundary)
+    return np.flatnonzero(mask)
 
 
 def uv_of(x, base, free):
@@ -29,16 +42,23 @@ def uv_of(x, base, free):
     return base.at[free].set(x.reshape(-1, 2))
 
 
-@functools.partial(jax.jit, static_argnames=("en",))
-def energy_value(x, base, free, F, frames, areas, *, en):
-    """The mesh energy (area-weighted mean density) at the free DOFs ``x``."""
-    return en_mod.total(en, frames, areas, uv_of(x, base, free)[F])
+def energy_at(x, base, free, F, frames, areas, params, en):
+    """The mesh energy (area-weighted mean density) at the free DOFs ``x`` (not jitted: the
+    body of the kernels below, and of the implicit gradient's backward pass)."""
+    return en_mod.total(en, frames, areas, uv_of(x, base, free)[F], params)
 
 
 @functools.partial(jax.jit, static_argnames=("en",))
-def energy_value_and_grad(x, base, free, F, frames, areas, *, en):
+def energy_value(x, base, free, F, frames, areas, params, *, en):
+    """The mesh energy (area-weighted mean density) at the free DOFs ``x``; ``params``: the
+    energy's parameters (``en`` is static, without them)."""
+    return energy_at(x, base, free, F, frames, areas, params, en)
+
+
+@functools.partial(jax.jit, static_argnames=("en",))
+def energy_value_and_grad(x, base, free, F, frames, areas, params, *, en):
     """The mesh energy and its gradient in ``x``."""
-    return jax.value_and_grad(lambda y: en_mod.total(en, frames, areas, uv_of(y, base, free)[F]))(x)
+    return jax.value_and_grad(energy_at)(x, base, free, F, frames, areas, params, en)
 
 
 @jax.jit
@@ -80,7 +100,8 @@ class HessianPattern:
 class Problem:
     """Everything about one minimization that does not change between iterations.
 
-    **Attributes:** ``mesh``, ``en`` (the :class:`~jaxparam.Energy`), ``F (m, 3)`` faces,
+    **Attributes:** ``mesh``, ``en`` (the :class:`~jaxparam.Energy` without its parameters,
+    :attr:`~jaxparam.Energy.static`), ``params`` (its parameters), ``F (m, 3)`` faces,
     ``frames (m, 3, 2)`` and ``areas (m,)`` of the 3D triangles, ``free (k,)`` the free
     vertices (referenced ones; all of them with ``free_boundary``, else the interior),
     ``base (n, 2)`` the start UVs (NaN rows zeroed), ``x0 (2 k,)`` the start's free DOFs,
@@ -89,13 +110,13 @@ class Problem:
 
     def __init__(self, mesh, en, free_boundary: bool, uv0):
         t = mesh.topology
-        self.mesh, self.en = mesh, en
+        self.mesh, self.en = mesh, en.static
+        self.params = jax.tree_util.tree_map(jnp.asarray, en.params)
         self.F = mesh.faces
         V = jnp.asarray(mesh.vertices, dtype=jnp.float64)
         self.frames = geo.local_frames(V, self.F)
         self.areas = geo.face_areas(V, self.F)
-        free_mask = t.referenced & (np.ones(t.n_vertices, bool) if free_boundary else ~t.is_boundary)
-        self.free = np.flatnonzero(free_mask)
+        self.free = free_vertices(t, free_boundary)
         if self.free.size == 0:
             raise SolverError("minimize: no free vertex to optimize (every vertex is on the fixed "
                               "boundary); use free_boundary=True.", stage="init")
@@ -106,8 +127,9 @@ class Problem:
 
     @property
     def arrays(self) -> tuple:
-        """``(base, free, F, frames, areas)``: the arrays the energy kernels take after ``x``."""
-        return self.base, self.free, self.F, self.frames, self.areas
+        """``(base, free, F, frames, areas, params)``: what the energy kernels take after
+        ``x``."""
+        return self.base, self.free, self.F, self.frames, self.areas, self.params
 
     def uv(self, x):
         """The ``(n, 2)`` UVs (a JAX array) of the free DOFs ``x``."""
@@ -158,10 +180,23 @@ class Problem:
         return HessianPattern(sparse.Pattern(indptr, cols, N), pos, diag)
 
     def normalize(self, x):
-        """Free boundary, scale-invariant energy: recentre and rescale to the start's area."""
+        """Free boundary, scale-invariant energy: recentre and rescale to the start's area
+        (on the host; :func:`normalized` is the same map in JAX)."""
         uv = np.asarray(self.uv(x))[self.free]
         U0 = np.asarray(self.x0).reshape(-1, 2)
         a0 = float(np.sum(np.asarray(geo.signed_areas(self.uv(self.x0), self.F))))
         a = float(np.sum(np.asarray(geo.signed_areas(self.uv(x), self.F))))
         uv = (uv - uv.mean(0)) * np.sqrt(a0 / a) + U0.mean(0)
         return uv.reshape(-1)
+
+
+def normalized(x, base, free, F):
+    """:meth:`Problem.normalize` in JAX (differentiable in ``x`` and in the start ``base``):
+    the free UVs of ``x`` recentred on the start's free UVs' mean and rescaled to the
+    start's signed UV area."""
+    uv = uv_of(x, base, free)
+    U, U0 = uv[free], base[free]
+    a0 = jnp.sum(geo.signed_areas(base, F))
+    a = jnp.sum(geo.signed_areas(uv, F))
+    U = (U - U.mean(0, keepdims=True)) * jnp.sqrt(a0 / a) + U0.mean(0, keepdims=True)
+    return U.reshape(-1)
