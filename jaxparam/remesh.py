@@ -20,7 +20,12 @@ vertices of the remesh are those of ``T^l``; the result, a :class:`Remesh`, carr
 the two vertices whose edge it splits): everything :mod:`jaxparam.wavelets` needs.
 
 Topology is numpy; the lift (step 3) is a gather and a weighted sum, written in JAX so the
-remesh is differentiable in the mesh's vertex positions.
+remesh is differentiable in the mesh's vertex positions.  When the UVs are traced too (``uv =
+jp.convex_map(mesh)`` inside ``jax.grad``), the sample points (steps 1-2) and their barycentric
+coordinates are recomputed in JAX from the UVs, so the derivative also follows the sample points
+as the parameter domain moves; the discrete choices (which face holds each sample point, which
+boundary segment each boundary sample point lies on) are made on the concrete values and held
+fixed (see :func:`remesh`).
 """
 from __future__ import annotations
 
@@ -34,7 +39,7 @@ from .errors import MeshError, first_few
 from .disk import disk_check
 from .mesh import TriMesh
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
-from .triangles import locate, signed_area2
+from .triangles import barycentric, locate, signed_area2
 
 __all__ = ["Remesh", "remesh", "base_domain", "refine_domain", "BoundaryCurve"]
 
@@ -100,12 +105,41 @@ class BoundaryCurve:
         self.cum = np.concatenate([[0.0], np.cumsum(seg)])
         self.length = float(self.cum[-1])
 
+    def segment(self, s: np.ndarray):
+        """``(s mod L (k,), i (k,) int)``: the arc lengths ``s (k,)`` taken modulo the length,
+        and the polygon segment ``points[i] -> points[i + 1]`` each lies on."""
+        s = np.mod(s, self.length)
+        return s, np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.points) - 1)
+
     def at(self, s: np.ndarray) -> np.ndarray:
         """``(k, 2)``: the points at arc lengths ``s (k,)`` (taken modulo the length)."""
-        s = np.mod(s, self.length)
-        i = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.points) - 1)
+        s, i = self.segment(s)
         t = (s - self.cum[i]) / np.maximum(self.cum[i + 1] - self.cum[i], 1e-300)
         return (1 - t)[:, None] * self.points[i] + t[:, None] * np.roll(self.points, -1, axis=0)[i]
+
+
+def _wraps(s_raw: np.ndarray, s: np.ndarray, length: float) -> np.ndarray:
+    """The integers ``n`` with ``s = s_raw - n * length`` (``s`` a ``np.mod`` of ``s_raw``)."""
+    return np.rint((s_raw - s) / length)
+
+
+class _CurveJax:
+    """The boundary polygon of traced UVs ``U[loop]``, in JAX: the counterpart of
+    :class:`BoundaryCurve` whose discrete choices (segment of each point, wraps of the arc
+    length) are taken from a :class:`BoundaryCurve` of the concrete values."""
+
+    def __init__(self, U, loop):
+        self.P = U[jnp.asarray(loop)]
+        self.Pn = jnp.roll(self.P, -1, axis=0)
+        d = self.Pn - self.P
+        self.cum = jnp.concatenate([jnp.zeros(1, self.P.dtype), jnp.cumsum(jnp.sqrt(jnp.sum(d * d, 1)))])
+        self.length = self.cum[-1]
+
+    def at(self, s, n, i):
+        """The points at arc lengths ``s - n L`` on the segments ``i`` (``n``, ``i`` numpy)."""
+        s = s - jnp.asarray(n) * self.length
+        t = (s - self.cum[i]) / jnp.maximum(self.cum[i + 1] - self.cum[i], 1e-300)
+        return (1 - t)[:, None] * self.P[i] + t[:, None] * self.Pn[i]
 
 
 def base_domain(uv: np.ndarray, loop: np.ndarray, corners: int | np.ndarray = 6):
@@ -153,22 +187,83 @@ def refine_domain(uv0, faces0, s0, curve: BoundaryCurve, levels: int):
     """``levels`` dyadic refinements of a base domain whose boundary vertices sit at arc
     lengths ``s0`` on ``curve``; new boundary vertices go onto the curve halfway between
     their parents.  **Returns:** ``(uv (n_j, 2), Hierarchy)``."""
+    uv, H, _ = _refine(uv0, faces0, s0, curve, levels)
+    return uv, H
+
+
+def _refine(uv0, faces0, s0, curve: BoundaryCurve, levels: int):
+    """:func:`refine_domain`, also returning per level the discrete choices that
+    :func:`_refine_jax` repeats: ``(p, q, n_half, n_new, n_at, seg)`` for the new boundary
+    vertices (parents, the wraps of the half arc, of the new arc length and of the point
+    lookup, the polygon segment)."""
     uv, s = np.asarray(uv0, np.float64), np.asarray(s0, np.float64)
     H = dyadic_hierarchy(faces0, uv.shape[0], levels)
     L = curve.length
+    steps = []
     for par, on_bnd in zip(H.parents, H.on_boundary):
         mid = 0.5 * (uv[par[:, 0]] + uv[par[:, 1]])
         s_new = np.full(par.shape[0], np.nan)
+        p, q = par[on_bnd, 0], par[on_bnd, 1]
+        # Boundary half-edges p -> q run along an anticlockwise face; the curve may run
+        # either way, so take the arc between s_p and s_q that is shorter than half.
+        x = s[q] - s[p] + 0.5 * L
+        d = np.mod(x, L) - 0.5 * L
+        y = s[p] + 0.5 * d
+        s_b = np.mod(y, L)
+        s_at, seg = curve.segment(s_b)
         if on_bnd.any():
-            p, q = par[on_bnd, 0], par[on_bnd, 1]
-            # Boundary half-edges p -> q run along an anticlockwise face; the curve may run
-            # either way, so take the arc between s_p and s_q that is shorter than half.
-            d = np.mod(s[q] - s[p] + 0.5 * L, L) - 0.5 * L
-            s_new[on_bnd] = np.mod(s[p] + 0.5 * d, L)
-            mid[on_bnd] = curve.at(s_new[on_bnd])
+            s_new[on_bnd] = s_b
+            mid[on_bnd] = curve.at(s_b)
+        steps.append((p, q, _wraps(x, d + 0.5 * L, L), _wraps(y, s_b, L), _wraps(s_b, s_at, L), seg))
         uv = np.concatenate([uv, mid])
         s = np.concatenate([s, s_new])
-    return uv, H
+    return uv, H, steps
+
+
+def _refine_jax(uv0, s0, curve: _CurveJax, H: Hierarchy, steps):
+    """:func:`_refine` on traced base points ``uv0`` and arc lengths ``s0`` (JAX; the
+    interior vertices' ``s0`` entries are unused), with its discrete choices ``steps``."""
+    uv, s, L = uv0, s0, curve.length
+    for par, on_bnd, (p, q, n_half, n_new, n_at, seg) in zip(H.parents, H.on_boundary, steps):
+        mid = 0.5 * (uv[par[:, 0]] + uv[par[:, 1]])
+        s_new = jnp.zeros(par.shape[0], uv.dtype)
+        if on_bnd.any():
+            d = s[q] - s[p] + 0.5 * L - jnp.asarray(n_half) * L - 0.5 * L
+            s_b = s[p] + 0.5 * d - jnp.asarray(n_new) * L
+            b = np.flatnonzero(on_bnd)
+            s_new = s_new.at[b].set(s_b)
+            mid = mid.at[b].set(curve.at(s_b, n_at, seg))
+        uv = jnp.concatenate([uv, mid])
+        s = jnp.concatenate([s, s_new])
+    return uv
+
+
+def _concrete(a):
+    """``a`` as a host array when its value is known now (a constant, or a tracer of
+    ``jax.grad`` / ``jax.jvp`` whose primal is concrete), else ``None`` (under ``jax.jit`` or
+    ``jax.vmap``)."""
+    if not isinstance(a, jax.core.Tracer):
+        return np.asarray(a, np.float64)
+    try:
+        return np.asarray(jax.lax.stop_gradient(a), np.float64)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
+
+
+def _sample_points_jax(uv, loop, fan, s0, curve: BoundaryCurve, H: Hierarchy, steps):
+    """The sample points ``T^j`` (``(n_j, 2)``, JAX) as functions of traced UVs: the base
+    corners on the boundary polygon ``uv[loop]``, their centre, the refinement; each point's
+    polygon segment and arc-length wraps are those of the concrete computation."""
+    cj = _CurveJax(uv, loop)
+    c = H.counts[0] - 1
+    if np.ndim(fan) == 0:
+        s_raw = cj.length * jnp.arange(c) / c
+    else:
+        s_raw = cj.cum[np.asarray(fan)]
+    s_at, seg = curve.segment(s0[:c])
+    pts = cj.at(s_raw, _wraps(s0[:c], s_at, curve.length), seg)
+    uv0 = jnp.concatenate([pts, jnp.mean(pts, axis=0, keepdims=True)])
+    return _refine_jax(uv0, jnp.concatenate([s_raw, jnp.zeros(1, s_raw.dtype)]), cj, H, steps)
 
 
 def remesh(mesh: TriMesh, uv, levels: int = 4, *, base_faces: int = 6, corners=None) -> Remesh:
@@ -192,11 +287,36 @@ def remesh(mesh: TriMesh, uv, levels: int = 4, *, base_faces: int = 6, corners=N
     level, ``.mesh.uv`` (also ``.uv``) their parameter points; ``.hierarchy`` a
     :class:`~jaxparam.subdivision.Hierarchy`; ``.base_faces`` the faces of ``T^0``.
 
+    **Differentiable** in ``mesh.vertices`` and in ``uv``, under ``jax.grad`` and ``jax.jvp``
+    (not under ``jax.jit`` or ``jax.vmap`` when ``uv`` is traced: point location runs on the
+    host and needs the UVs' values, and the :class:`~jaxparam.subdivision.Hierarchy` is static
+    data; a traced ``mesh.vertices`` with concrete UVs is fine under ``jit``).  A remesh vertex
+    is ``X_k = sum_c b_kc(uv) V[F[f_k, c]]``: the barycentric coordinates ``b`` of the sample
+    point ``q_k`` in its face's UV triangle, taken with the vertices of that face.  With
+    concrete UVs only ``V`` moves.  With traced UVs (``uv = jp.convex_map(mesh)`` inside
+    ``jax.grad``, or any UVs you differentiate in) ``b`` and the sample points ``q_k`` are
+    recomputed in JAX from ``uv``: the base corners on the boundary polygon ``uv[loop]`` (at
+    their arc lengths, evenly spaced fractions of its length, or its vertices ``loop[corners]``),
+    the fan's centre (their mean), the edge midpoints and the new boundary points halfway along
+    the polygon by arc length; ``.mesh.uv`` is then that JAX array.  **Held fixed** (chosen on
+    the concrete values, piecewise constant in them): the face ``f_k`` holding each sample point
+    (:func:`jaxparam.triangles.locate`, coordinates clipped to ``>= 0`` as there), the polygon
+    segment each boundary sample point lies on, the integer wraps of the arc length modulo the
+    polygon's length, and the base fan's orientation and the hierarchy.  The derivative is the
+    exact derivative of the map wherever those choices do not change under a small move; at the
+    UVs where one does (a sample point on a UV edge, a boundary point on a polygon vertex) it is
+    a one-sided one.
+
     Example::
 
         uv = jp.convex_map(mesh, boundary="circle")
         semi = jp.remesh(mesh, uv, levels=4, base_faces=6)
         jp.save("semi.obj", semi.mesh)          # with the parameter points as vt
+
+        def loss(V):                             # gradient also through the sample points
+            m = jp.TriMesh(V, mesh.faces)
+            return jnp.sum(jp.remesh(m, jp.convex_map(m), levels=3).mesh.vertices[:, 2] ** 2)
+        jax.grad(loss)(mesh.vertices)
     """
     if corners is not None and base_faces != 6:
         raise MeshError("remesh: pass base_faces or corners, not both (corners is base_faces' "
@@ -212,21 +332,33 @@ def remesh(mesh: TriMesh, uv, levels: int = 4, *, base_faces: int = 6, corners=N
                         "needs a disk (one boundary loop): fill the holes first.")
     if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= 10):
         raise MeshError(f"remesh: levels must be an integer in [0, 10], got {levels!r}.")
-    U = np.asarray(uv, np.float64)
+    traced = isinstance(uv, jax.core.Tracer)
+    U = _concrete(uv)
+    if U is None:
+        raise MeshError("remesh: the UVs are traced without a value (inside jax.jit or jax.vmap); "
+                        "remesh locates the sample points on the host from the UVs' values: call "
+                        "it outside jax.jit (jax.grad and jax.jvp are fine), or pass concrete UVs.")
     if U.shape != (mesh.n_vertices, 2) or not np.all(np.isfinite(U)):
         raise MeshError(f"remesh: uv must be a finite ({mesh.n_vertices}, 2) array, got shape {U.shape}.")
     flipped = np.flatnonzero(signed_area2(U, mesh.faces) <= 0)
     if flipped.size:
         raise MeshError(f"remesh: the parameterization is not one-to-one: faces {first_few(flipped)} "
                         "are flipped or degenerate in the UVs; use a convex-combination map.")
-    uv0, F0, s0, curve = base_domain(U, t.boundary_loops[0], fan)
-    uvj, H = refine_domain(uv0, F0, s0, curve, int(levels))
+    loop = t.boundary_loops[0]
+    uv0, F0, s0, curve = base_domain(U, loop, fan)
+    uvj, H, steps = _refine(uv0, F0, s0, curve, int(levels))
     bad = np.flatnonzero(signed_area2(uvj, H.faces[-1]) <= 0)
     if bad.size:
         raise MeshError(f"remesh: {bad.size} refined triangles fold over where the boundary bends "
                         f"(e.g. face {int(bad[0])}); use more corners or a convex boundary map.")
     face, bary = locate(U, mesh.faces, uvj)
-    idx = jnp.asarray(mesh.faces[face])
+    idx = mesh.faces[face]
     V = jnp.asarray(mesh.vertices)
-    X = jnp.einsum("kc,kcd->kd", jnp.asarray(bary), V[idx])
+    if traced:
+        # The same sample points and coordinates as functions of the traced UVs (the located
+        # faces, segments and wraps held fixed), clipped and normalized as locate does.
+        uvj = _sample_points_jax(uv, loop, fan, s0, curve, H, steps)
+        b = jnp.maximum(barycentric(uv[jnp.asarray(idx)], uvj, xp=jnp), 0.0)
+        bary = b / jnp.sum(b, axis=1, keepdims=True)
+    X = jnp.einsum("kc,kcd->kd", jnp.asarray(bary), V[jnp.asarray(idx)])
     return Remesh(TriMesh(X, H.faces[-1], uv=uvj, validate=False, name="remesh"), H)

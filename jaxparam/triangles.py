@@ -2,7 +2,8 @@
 
 Shared by the reconstruction (:mod:`jaxparam.points`), the remesh (:mod:`jaxparam.remesh`) and the
 closed-mesh charts (:mod:`jaxparam.manifold`).  Everything here is concrete numpy on index
-arrays; the differentiable counterparts live in :mod:`jaxparam.geometry`.
+arrays (:func:`barycentric` also takes JAX arrays, ``xp=jax.numpy``); the differentiable
+counterparts of the rest live in :mod:`jaxparam.geometry`.
 """
 from __future__ import annotations
 
@@ -25,13 +26,17 @@ def signed_area2(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
     return orient(uv, F[:, 0], F[:, 1], F[:, 2])
 
 
-def barycentric(T: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """Barycentric coordinates ``(k, 3)`` of points ``p (k, 2)`` in triangles ``T (k, 3, 2)``."""
+def barycentric(T: np.ndarray, p: np.ndarray, *, xp=np) -> np.ndarray:
+    """Barycentric coordinates ``(k, 3)`` of points ``p (k, 2)`` in triangles ``T (k, 3, 2)``.
+
+    ``xp`` the array module: ``numpy`` (the default), or ``jax.numpy`` for JAX arrays, where
+    the coordinates are then differentiable in ``T`` and ``p`` (:func:`jaxparam.remesh` and
+    :func:`jaxparam.fit_surface` use it so)."""
     a, b, c = T[:, 0], T[:, 1], T[:, 2]
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     l1 = ((b[:, 0] - p[:, 0]) * (c[:, 1] - p[:, 1]) - (b[:, 1] - p[:, 1]) * (c[:, 0] - p[:, 0])) / det
     l2 = ((c[:, 0] - p[:, 0]) * (a[:, 1] - p[:, 1]) - (c[:, 1] - p[:, 1]) * (a[:, 0] - p[:, 0])) / det
-    return np.stack([l1, l2, 1.0 - l1 - l2], axis=1)
+    return xp.stack([l1, l2, 1.0 - l1 - l2], axis=1)
 
 
 def locate(uv: np.ndarray, faces: np.ndarray, query: np.ndarray, *, tol: float = 1e-7,

@@ -24,8 +24,9 @@ The input is a :class:`jaxparam.remesh.Remesh` (from :func:`jaxparam.remesh` or
 :class:`~jaxparam.subdivision.Hierarchy` is then read from its faces or given as
 ``hierarchy=``.
 
-Everything is written in JAX: analysis, synthesis and compression (for a fixed choice of
-kept coefficients) are differentiable, and the results are pytrees.
+Everything is written in JAX: analysis, synthesis and compression are differentiable (the
+compression with its choice of kept coefficients held fixed, see :func:`compress`), they run
+under ``jax.jit``, and the results are pytrees.
 """
 from __future__ import annotations
 
@@ -206,21 +207,41 @@ def compress(semi, keep: float = 0.02, *, wavelet: str = "lifted",
 
         small = jp.wavelets.compress(semi, keep=0.02)
         jp.save("small.obj", small.mesh)
+
+    **Which coefficients.** The ``k = round(keep * count)`` coefficients with the largest
+    scores ``|d| 2^-l`` (ties to the lower index: base-first level order, then vertex order),
+    chosen by ``jax.lax.top_k``, so the count ``k`` is static and ``compress`` runs under
+    ``jax.jit`` too.
+
+    **Differentiable** in ``semi``'s vertex positions (``jax.grad``, ``jax.jvp``, under
+    ``jax.jit``): the result is ``synthesize`` of the base and the kept coefficients, linear
+    in the positions for a given choice.  **Held fixed**: the choice of kept coefficients (the
+    mask).  It is made on the values with the gradient stopped, so it is piecewise constant in
+    the positions, and the derivative is that of the compression with the mask frozen: exact
+    wherever a small move leaves the ranking of the scores at the ``k``-th place unchanged (no
+    tie between the last kept and the first dropped score).
     """
     if not (isinstance(keep, (int, float, np.floating)) and 0.0 <= float(keep) <= 1.0):
         raise MeshError(f"wavelets.compress: keep must be a fraction in [0, 1], got {keep!r}.")
     mesh, H = _mesh_and_hierarchy(semi, hierarchy, "compress")
     c = analyze(mesh, wavelet=wavelet, hierarchy=H)
-    if c.count == 0:
-        kept_masks = []
+    sizes = [d.shape[0] for d in c.details]
+    n_keep = int(round(float(keep) * c.count))
+    if n_keep == 0:
+        details = tuple(jnp.zeros_like(d) for d in c.details)
+    elif n_keep == c.count:
+        details = c.details
     else:
-        score = np.concatenate([np.linalg.norm(np.asarray(d), axis=1) * 2.0 ** -lv
-                                for lv, d in enumerate(c.details)])
-        n_keep = int(round(float(keep) * score.size))
-        chosen = np.zeros(score.size, bool)
-        chosen[np.argsort(-score, kind="stable")[:n_keep]] = True
-        kept_masks = np.split(chosen, np.cumsum([d.shape[0] for d in c.details])[:-1])
-    details = tuple(jnp.where(jnp.asarray(m)[:, None], d, 0.0) for m, d in zip(kept_masks, c.details))
+        stopped = [jax.lax.stop_gradient(d) for d in c.details]
+        try:         # concrete values (eager, or under jax.grad): the scores as numpy computes them
+            score = jnp.asarray(np.concatenate([np.linalg.norm(np.asarray(d), axis=1) * 2.0 ** -lv
+                                                for lv, d in enumerate(stopped)]))
+        except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+            score = jnp.concatenate([jnp.linalg.norm(d, axis=1) * 2.0 ** -lv
+                                     for lv, d in enumerate(stopped)])        # under jax.jit
+        chosen = jnp.zeros(c.count, bool).at[jax.lax.top_k(score, n_keep)[1]].set(True)
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        details = tuple(jnp.where(chosen[a:b, None], d, 0.0)
+                        for a, b, d in zip(starts[:-1], starts[1:], c.details))
     X = synthesize(Coefficients(c.base, details, H, wavelet))
-    kept = int(sum(int(m.sum()) for m in kept_masks))
-    return Compressed(mesh.with_vertices(X), H, kept, (H.counts[0] + kept) / mesh.n_vertices)
+    return Compressed(mesh.with_vertices(X), H, n_keep, (H.counts[0] + n_keep) / mesh.n_vertices)
