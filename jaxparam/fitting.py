@@ -29,25 +29,13 @@ import numpy as np
 
 from . import sparse
 from .errors import MeshError
-from .mesh import TriMesh, grid_faces
+from .mesh import TriMesh, concrete_values, grid_faces
 from .options import choose
 from .triangles import barycentric
 
 __all__ = ["Surface", "fit_surface", "KINDS"]
 
 KINDS = ("spline", "clough_tocher")
-
-
-def _concrete(a):
-    """``a`` as a host array when its value is known now (a constant, or a tracer of
-    ``jax.grad`` / ``jax.jvp`` whose primal is concrete), else ``None`` (under ``jax.jit`` or
-    ``jax.vmap``)."""
-    if not isinstance(a, jax.core.Tracer):
-        return np.asarray(a, np.float64)
-    try:
-        return np.asarray(jax.lax.stop_gradient(a), np.float64)
-    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
-        return None
 
 
 def _traced(*arrays) -> bool:
@@ -88,7 +76,7 @@ class Surface:
         UV = np.column_stack([u.ravel(), v.ravel()])
         X = self.evaluate(UV)
         F = grid_faces(resolution, resolution)
-        Xc = _concrete(X)
+        Xc = concrete_values(X)
         ok = np.all(np.isfinite(Xc), axis=1) if Xc is not None else self._defined(UV)
         F = F[ok[F].all(1)]
         if F.size == 0:
@@ -150,7 +138,7 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     """
     kind = choose(kind, KINDS, what="kind", where="fit_surface")
     X_in = mesh_or_points.vertices if isinstance(mesh_or_points, TriMesh) else mesh_or_points
-    Uc = _concrete(uv)
+    Uc = concrete_values(uv)
     if Uc is None:
         raise MeshError("fit_surface: uv is traced without a value (inside jax.jit or jax.vmap); "
                         "the knots and the triangulation are chosen from its values: call "
@@ -159,7 +147,7 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     n_pts = np.shape(X_in)[0] if np.ndim(X_in) else 0
     if Uc.shape != (n_pts, 2):
         raise MeshError(f"fit_surface: uv must have shape ({n_pts}, 2), got {Uc.shape}.")
-    Xc = _concrete(X_in)
+    Xc = concrete_values(X_in)
     ok = np.all(np.isfinite(Uc), axis=1)
     if Xc is not None:
         ok &= np.all(np.isfinite(Xc), axis=1)
@@ -332,7 +320,7 @@ def _spline(U, X, Uc, lo, hi, bbox, knots) -> Surface:
         return (q[:, 0] >= box[0]) & (q[:, 0] <= box[1]) & (q[:, 1] >= box[2]) & (q[:, 1] <= box[3])
 
     def ev(q):
-        qc = _concrete(q)
+        qc = concrete_values(q)
         xp = np if qc is not None else jnp
         src = qc if qc is not None else q
         ku, kv = _spans(Tu, src[:, 0], xp), _spans(Tv, src[:, 1], xp)
@@ -479,7 +467,7 @@ def _clough_tocher(U, X, Uc, Xc, bbox) -> Surface:
     def ev(q):
         if not (traced or isinstance(q, jax.core.Tracer)):
             return np.asarray(f(q)).reshape(-1, 3)
-        qc = _concrete(q)
+        qc = concrete_values(q)
         if qc is not None and f is not None:
             value = jnp.asarray(host_values(None, qc))
         else:

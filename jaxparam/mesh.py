@@ -16,11 +16,23 @@ from . import tol
 from . import topology as topo
 from .errors import DegenerateFaceError, MeshError, first_few
 
-__all__ = ["TriMesh", "grid_faces"]
+__all__ = ["TriMesh", "grid_faces", "concrete_values"]
 
 
 def _is_concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
+
+
+def concrete_values(a):
+    """``a`` as a host array when its value is known now (a constant, or a tracer of
+    ``jax.grad`` / ``jax.jvp`` whose primal is concrete), else ``None`` (under ``jax.jit`` or
+    ``jax.vmap``)."""
+    if not isinstance(a, jax.core.Tracer):
+        return np.asarray(a, np.float64)
+    try:
+        return np.asarray(jax.lax.stop_gradient(a), np.float64)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
 
 
 @jax.tree_util.register_pytree_node_class

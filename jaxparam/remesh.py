@@ -37,7 +37,7 @@ import numpy as np
 
 from .errors import MeshError, first_few
 from .disk import disk_check
-from .mesh import TriMesh
+from .mesh import TriMesh, concrete_values
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
 from .triangles import barycentric, locate, signed_area2
 
@@ -238,18 +238,6 @@ def _refine_jax(uv0, s0, curve: _CurveJax, H: Hierarchy, steps):
     return uv
 
 
-def _concrete(a):
-    """``a`` as a host array when its value is known now (a constant, or a tracer of
-    ``jax.grad`` / ``jax.jvp`` whose primal is concrete), else ``None`` (under ``jax.jit`` or
-    ``jax.vmap``)."""
-    if not isinstance(a, jax.core.Tracer):
-        return np.asarray(a, np.float64)
-    try:
-        return np.asarray(jax.lax.stop_gradient(a), np.float64)
-    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
-        return None
-
-
 def _sample_points_jax(uv, loop, fan, s0, curve: BoundaryCurve, H: Hierarchy, steps):
     """The sample points ``T^j`` (``(n_j, 2)``, JAX) as functions of traced UVs: the base
     corners on the boundary polygon ``uv[loop]``, their centre, the refinement; each point's
@@ -333,7 +321,7 @@ def remesh(mesh: TriMesh, uv, levels: int = 4, *, base_faces: int = 6, corners=N
     if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= 10):
         raise MeshError(f"remesh: levels must be an integer in [0, 10], got {levels!r}.")
     traced = isinstance(uv, jax.core.Tracer)
-    U = _concrete(uv)
+    U = concrete_values(uv)
     if U is None:
         raise MeshError("remesh: the UVs are traced without a value (inside jax.jit or jax.vmap); "
                         "remesh locates the sample points on the host from the UVs' values: call "
