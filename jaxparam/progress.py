@@ -1,0 +1,58 @@
+"""Progress bars for every long stage of the library, behind one switch (``jp.config.progress``).
+
+``progress(iterable=None, *, total=None, desc, unit="it", verbose=None)`` returns a tqdm bar
+(usable as an iterator wrapper, a context manager, or with ``.update(n)``).  It
+
+- is disabled when ``verbose`` is false, or when ``verbose`` is None and ``jp.config.progress``
+  is off (``JAXPARAM_PROGRESS=0`` or ``TQDM_DISABLE=1`` in the environment);
+- uses the notebook widget only inside Jupyter *with* ipywidgets, and the text bar otherwise,
+  so a kernel without ipywidgets never prints tqdm's "IProgress not found" warning;
+- shows only for stages that last longer than ``delay`` seconds (default 1 s).
+"""
+from __future__ import annotations
+
+import sys
+from functools import lru_cache
+
+from .settings import config
+
+__all__ = ["progress", "enabled"]
+
+
+def enabled(verbose: bool | None = None) -> bool:
+    """Whether a bar shows: ``verbose`` when given, else the library switch."""
+    return config.progress if verbose is None else bool(verbose)
+
+
+@lru_cache(maxsize=1)
+def _bar_class():
+    """tqdm's notebook bar in a Jupyter kernel that has ipywidgets, else the text bar."""
+    from tqdm import tqdm as text_bar
+
+    shell = sys.modules.get("IPython")
+    try:
+        kernel = shell is not None and type(shell.get_ipython()).__name__ == "ZMQInteractiveShell"
+    except Exception:  # noqa: BLE001 - IPython present but not running a shell
+        kernel = False
+    if not kernel:
+        return text_bar
+    try:
+        import ipywidgets  # noqa: F401
+        from tqdm.notebook import tqdm as notebook_bar
+    except ImportError:
+        return text_bar
+    return notebook_bar
+
+
+def progress(iterable=None, *, total=None, desc: str, unit: str = "it", verbose: bool | None = None,
+             delay: float = 1.0, leave: bool = False):
+    """A progress bar over ``iterable`` (or of ``total`` steps) labelled ``desc``.
+
+    Example::
+
+        with progress(total=n_collapses, desc="decimation", unit="collapse") as bar:
+            ...
+            bar.update(k)
+    """
+    return _bar_class()(iterable, total=total, desc=desc, unit=unit, disable=not enabled(verbose),
+                        delay=delay, leave=leave, file=sys.stderr)
