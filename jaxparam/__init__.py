@@ -5,6 +5,13 @@ computation of the library is double precision, and so are the JAX arrays you
 create after the import.  Import jaxparam (or set ``JAX_ENABLE_X64=1``) before
 creating arrays you pass to it.
 
+It also turns on JAX's persistent compilation cache in the user's cache folder, so a second
+process reuses compiled kernels (``JAXPARAM_CACHE`` moves it, ``JAXPARAM_CACHE=off`` turns it
+off; ``jp.config.compile_cache`` changes it at run time).
+
+Submodules and functions load on first use (PEP 562), so ``import jaxparam`` costs little
+more than ``import jax``; ``jp.convex_map`` imports the linear-map stack when first touched.
+
 Example::
 
     import jaxparam as jp
@@ -12,31 +19,81 @@ Example::
     uv = jp.convex_map(mesh, weights="shape_preserving", boundary="circle")
     print(jp.distortion(mesh, uv))
 """
+import importlib as _importlib
+import sys as _sys
+import types as _types
+
 import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-from . import errors, tol, options, topology, triangles, subdivision, io, disk  # noqa: E402
-from . import geometry, boundary, weights, sparse, combination  # noqa: E402
-from . import linear, metrics, shapes, energies, optimize, points, fitting, plot  # noqa: E402
-from .errors import (  # noqa: E402
+from .errors import (  # noqa: E402  (cheap: no numpy)
     DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
     PointCloudError, SolverError, TopologyError,
 )
-from .mesh import TriMesh  # noqa: E402
-from .io import load, save  # noqa: E402
-from .linear import convex_map, least_squares_map  # noqa: E402
-from .metrics import DistortionReport, distortion  # noqa: E402
-from .energies import ENERGIES, Energy, energy  # noqa: E402
-from .optimize import MinimizeResult, minimize  # noqa: E402
-from .points import Reconstruction, load_points, meshless_map, reconstruct_surface  # noqa: E402
-from .fitting import fit_surface  # noqa: E402
-from . import wavelets  # noqa: E402
-from .remesh import Remesh, remesh  # noqa: E402  (the function; the module is jaxparam.remesh in sys.modules)
-from . import manifold  # noqa: E402
-from .manifold import manifold_map  # noqa: E402
+from .settings import config  # noqa: E402
+
+config.apply_compile_cache()
 
 __version__ = "0.1.0"
+
+#: Public names that live in a submodule: name -> (module, attribute).
+_NAMES = {
+    "TriMesh": ("mesh", "TriMesh"),
+    "load": ("io", "load"), "save": ("io", "save"),
+    "convex_map": ("linear", "convex_map"), "least_squares_map": ("linear", "least_squares_map"),
+    "DistortionReport": ("metrics", "DistortionReport"), "distortion": ("metrics", "distortion"),
+    "ENERGIES": ("energies", "ENERGIES"), "Energy": ("energies", "Energy"),
+    "energy": ("energies", "energy"),
+    "MinimizeResult": ("optimize", "MinimizeResult"), "minimize": ("optimize", "minimize"),
+    "Reconstruction": ("points", "Reconstruction"), "load_points": ("points", "load_points"),
+    "meshless_map": ("points", "meshless_map"),
+    "reconstruct_surface": ("points", "reconstruct_surface"),
+    "fit_surface": ("fitting", "fit_surface"),
+    "Remesh": ("remesh", "Remesh"), "remesh": ("remesh", "remesh"),
+    "manifold_map": ("manifold", "manifold_map"),
+}
+
+#: Submodules reachable as ``jp.<name>``.
+_MODULES = (
+    "errors", "tol", "options", "topology", "triangles", "subdivision", "io", "disk", "geometry",
+    "boundary", "weights", "sparse", "combination", "linear", "metrics", "shapes", "energies",
+    "optimize", "points", "fitting", "plot", "wavelets", "manifold", "distance", "settings",
+    "progress", "mesh",
+)
+
+#: Names that are both a submodule and a public function (``jp.remesh`` is the function; the
+#: module is ``sys.modules["jaxparam.remesh"]``).  Importing the submodule must not replace
+#: the function on the package.
+_SHADOWED = {name for name, (module, attr) in _NAMES.items() if name == module}
+
+
+class _Package(_types.ModuleType):
+    """The package's module type: keeps a function that shares its name with a submodule."""
+
+    def __setattr__(self, name, value):
+        if name in _SHADOWED and isinstance(value, _types.ModuleType):
+            return                                   # the import system binding the submodule
+        super().__setattr__(name, value)
+
+
+def __getattr__(name):
+    if name in _NAMES:
+        module, attr = _NAMES[name]
+        value = getattr(_importlib.import_module(f"{__name__}.{module}"), attr)
+    elif name in _MODULES:
+        value = _importlib.import_module(f"{__name__}.{name}")
+    else:
+        raise AttributeError(f"module 'jaxparam' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
+
+_sys.modules[__name__].__class__ = _Package
 
 __all__ = [
     "TriMesh", "load", "save", "convex_map", "least_squares_map", "distortion",
@@ -47,4 +104,5 @@ __all__ = [
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
     "fitting", "fit_surface", "plot", "remesh", "wavelets", "manifold", "manifold_map",
     "options", "triangles", "subdivision", "io", "disk", "combination", "Reconstruction", "Remesh",
+    "config", "distance",
 ]

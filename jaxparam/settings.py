@@ -6,13 +6,22 @@
     ``TQDM_DISABLE`` is set to a true value.  A call's ``verbose=`` argument, where a function has
     one, overrides the setting for that call.
 
+``jp.config.compile_cache``
+    The folder of JAX's persistent compilation cache, which ``import jaxparam`` turns on so that a
+    second process reuses the kernels the first compiled: ``$JAXPARAM_CACHE`` when set, else
+    ``$XDG_CACHE_HOME/jaxparam/jax`` (``~/.cache/jaxparam/jax``).  ``JAXPARAM_CACHE=off`` (or
+    ``0``/``false``/``none``), or ``jp.config.compile_cache = None``, turns it off.  Compilations
+    shorter than 0.2 s are not stored (JAX's own ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``
+    changes that); delete the folder to empty it.
+
 This module imports nothing from jaxparam, so every layer may read it.
 """
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
-__all__ = ["Settings", "config", "env_flag"]
+__all__ = ["Settings", "config", "env_flag", "default_compile_cache"]
 
 _FALSE = {"0", "false", "no", "off", ""}
 
@@ -33,10 +42,11 @@ class Settings:
     ``AttributeError`` naming the known ones, so a typo is not silently ignored.
     """
 
-    __slots__ = ("_progress",)
+    __slots__ = ("_progress", "_compile_cache")
 
     def __init__(self) -> None:
         self._progress: bool | None = None
+        self._compile_cache: str | None = default_compile_cache()
 
     @property
     def progress(self) -> bool:
@@ -49,6 +59,31 @@ class Settings:
     def progress(self, value: bool | None) -> None:
         self._progress = None if value is None else bool(value)
 
+    @property
+    def compile_cache(self) -> str | None:
+        """The persistent compilation cache's folder, or None when it is off."""
+        return self._compile_cache
+
+    @compile_cache.setter
+    def compile_cache(self, folder) -> None:
+        self._compile_cache = None if folder is None else str(Path(folder).expanduser())
+        self.apply_compile_cache()
+
+    def apply_compile_cache(self) -> None:
+        """Hand :attr:`compile_cache` to JAX (on, in that folder; or off)."""
+        import jax
+
+        try:
+            if self._compile_cache is None:
+                jax.config.update("jax_enable_compilation_cache", False)
+                return
+            jax.config.update("jax_enable_compilation_cache", True)
+            jax.config.update("jax_compilation_cache_dir", self._compile_cache)
+            if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
+                jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+        except (AttributeError, KeyError):  # an old JAX without these options: run uncached
+            pass
+
     def __setattr__(self, name, value):
         if name not in Settings.__slots__ and not isinstance(getattr(Settings, name, None), property):
             known = [n for n, v in vars(Settings).items() if isinstance(v, property)]
@@ -56,7 +91,18 @@ class Settings:
         object.__setattr__(self, name, value)
 
     def __repr__(self) -> str:
-        return f"jp.config(progress={self.progress})"
+        return f"jp.config(progress={self.progress}, compile_cache={self.compile_cache!r})"
+
+
+def default_compile_cache() -> str | None:
+    """The cache folder named by the environment (see the module docstring), or None (off)."""
+    value = os.environ.get("JAXPARAM_CACHE")
+    if value is not None:
+        if value.strip().lower() in _FALSE | {"none"}:
+            return None
+        return str(Path(value).expanduser())
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return str(Path(base) / "jaxparam" / "jax")
 
 
 #: The one settings object of the library, exported as ``jp.config``.
