@@ -52,6 +52,9 @@ _NAMES = {
     "fit_surface": ("fitting", "fit_surface"),
     "Remesh": ("remesh", "Remesh"), "remesh": ("remesh", "remesh"),
     "manifold_map": ("manifold", "manifold_map"),
+    "to_trimesh": ("io", "to_trimesh"), "from_trimesh": ("io", "from_trimesh"),
+    "as_mesh": ("io", "as_mesh"), "checker_texture": ("io", "checker_texture"),
+    "boundary_loop": ("boundary", "boundary_loop"),
 }
 
 #: Submodules reachable as ``jp.<name>``.
@@ -104,5 +107,6 @@ __all__ = [
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",
     "fitting", "fit_surface", "plot", "remesh", "wavelets", "manifold", "manifold_map",
     "options", "triangles", "subdivision", "io", "disk", "combination", "Reconstruction", "Remesh",
-    "config", "distance",
+    "config", "distance", "to_trimesh", "from_trimesh", "as_mesh", "checker_texture",
+    "boundary_loop",
 ]

@@ -21,11 +21,13 @@ import numpy as np
 from . import tol
 from .errors import MeshError, first_few
 from .geometry import safe_norm
+from .io import as_mesh
 from .options import choose
 
 __all__ = [
     "arc_parameters", "circle", "square", "polygon", "plane", "plane_frame", "check_plane_boundary",
     "boundary_uv", "is_convex_polygon", "crossing_edges", "SHAPES", "SPACINGS",
+    "boundary_loop", "BoundaryUV", "user_boundary", "in_loop_order",
 ]
 
 SHAPES = ("circle", "square", "plane")
@@ -429,3 +431,97 @@ def _orient(a, b, c):
     """Sign of the turn ``a -> b -> c`` per row (+1 counter-clockwise, 0 collinear)."""
     return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
                    - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+# ------------------------------------------------------------------------------------------
+# User boundary UVs given per vertex, in any order
+# ------------------------------------------------------------------------------------------
+
+def boundary_loop(mesh) -> np.ndarray:
+    """The boundary loop that :func:`jaxparam.convex_map` maps onto its boundary: the
+    longest one, ``(k,) int64`` vertex indices in jaxparam's loop order (counter-clockwise,
+    the surface on the left).  A ``(k, 2)`` ``boundary=`` array without
+    ``boundary_indices`` must follow this order.
+
+    Example::
+
+        loop = jp.boundary_loop(mesh)
+        uv = jp.convex_map(mesh, boundary=dict(zip(loop.tolist(), my_uv)))
+    """
+    loops = as_mesh(mesh, "boundary_loop").topology.boundary_loops
+    if not loops:
+        raise MeshError("boundary_loop: the mesh is closed (no boundary loop); cut it open first "
+                        "or use jp.manifold_map.")
+    return loops[0]
+
+
+class BoundaryUV:
+    """Boundary UVs given per vertex: ``indices (k,) int64`` (concrete, distinct) and
+    ``uv (k, 2)`` (numpy, JAX, or traced), row ``i`` the UV of vertex ``indices[i]``."""
+
+    __slots__ = ("indices", "uv")
+
+    def __init__(self, indices, uv):
+        self.indices, self.uv = indices, uv
+
+
+def user_boundary(boundary, boundary_indices=None):
+    """``boundary`` as :func:`jaxparam.convex_map` takes it, with per-vertex UVs made a
+    :class:`BoundaryUV`: a mapping ``{vertex: (u, v)}`` or a ``(k, 2)`` array with
+    ``boundary_indices (k,)``; anything else is returned unchanged."""
+    if isinstance(boundary, dict) and "polygon" not in boundary:
+        if boundary_indices is not None:
+            raise MeshError("boundary: give the vertex indices either as the mapping's keys or "
+                            "as boundary_indices, not both.")
+        try:
+            idx = np.asarray([int(k) for k in boundary.keys()], np.int64)
+        except (TypeError, ValueError):
+            raise MeshError("boundary: a mapping of boundary UVs needs integer vertex indices as "
+                            f"keys (or the key 'polygon'), got keys {list(boundary)[:5]}.") from None
+        vals = list(boundary.values())
+        uv = jnp.stack([jnp.asarray(v, jnp.float64) for v in vals]) if vals else jnp.zeros((0, 2))
+        return _checked(idx, uv)
+    if boundary_indices is None:
+        return boundary
+    if isinstance(boundary, str) or isinstance(boundary, dict):
+        raise MeshError("boundary_indices: given only with a (k, 2) array of boundary UVs, got "
+                        f"boundary={boundary!r}.")
+    idx = np.asarray(boundary_indices)
+    if idx.ndim != 1 or not (np.issubdtype(idx.dtype, np.integer) or idx.size == 0):
+        raise MeshError(f"boundary_indices: must be a (k,) integer array, got shape {idx.shape} of "
+                        f"dtype {idx.dtype}.")
+    return _checked(idx.astype(np.int64), jnp.asarray(boundary, jnp.float64))
+
+
+def _checked(idx: np.ndarray, uv) -> BoundaryUV:
+    if uv.shape != (idx.size, 2):
+        raise MeshError(f"boundary: {idx.size} boundary vertices need ({idx.size}, 2) UVs, one row "
+                        f"each, got {tuple(uv.shape)}.")
+    u, counts = np.unique(idx, return_counts=True)
+    if np.any(counts > 1):
+        raise MeshError(f"boundary_indices: vertices {first_few(u[counts > 1])} are given more "
+                        "than once; give each boundary vertex one UV.")
+    return BoundaryUV(idx, uv)
+
+
+def in_loop_order(boundary, loop: np.ndarray):
+    """A :class:`BoundaryUV` as the ``(k, 2)`` UVs of ``loop`` in loop order (a gather: JAX
+    gradients flow to the given UVs); anything else unchanged.
+
+    Raises :class:`MeshError` unless the indices are exactly the loop's vertices, naming the
+    missing ones and the ones not on the loop.
+    """
+    if not isinstance(boundary, BoundaryUV):
+        return boundary
+    idx = boundary.indices
+    missing = np.setdiff1d(loop, idx)
+    extra = np.setdiff1d(idx, loop)
+    if missing.size or extra.size:
+        parts = ([f"missing vertices {first_few(missing)}"] if missing.size else []) + \
+                ([f"vertices {first_few(extra)} are not on it"] if extra.size else [])
+        raise MeshError(f"boundary: the boundary UVs must cover exactly the {loop.size} vertices "
+                        f"of the longest boundary loop (jp.boundary_loop(mesh)): "
+                        f"{'; '.join(parts)}.")
+    row = np.empty(int(max(loop.max(), idx.max())) + 1, np.int64)
+    row[idx] = np.arange(idx.size)
+    return boundary.uv[row[loop]]

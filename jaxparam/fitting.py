@@ -30,6 +30,7 @@ import numpy as np
 from . import sparse
 from .errors import MeshError
 from .mesh import TriMesh, concrete_values, grid_faces
+from .io import as_mesh
 from .options import choose
 from .triangles import barycentric
 
@@ -136,6 +137,8 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     triangulation need its values; a :class:`MeshError` says so); rows are then
     filtered on ``uv`` alone.
     """
+    if not hasattr(mesh_or_points, "shape"):
+        mesh_or_points = as_mesh(mesh_or_points, "fit_surface")
     kind = choose(kind, KINDS, what="kind", where="fit_surface")
     X_in = mesh_or_points.vertices if isinstance(mesh_or_points, TriMesh) else mesh_or_points
     Uc = concrete_values(uv)

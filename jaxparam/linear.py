@@ -21,6 +21,7 @@ from . import weights as wts
 from .disk import disk_check, fill_holes
 from .errors import MeshError, first_few
 from .mesh import TriMesh
+from .io import as_mesh
 from .options import choose
 
 __all__ = ["InteriorSystem", "interior_system", "solve_interior", "convex_map",
@@ -97,7 +98,7 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
     t = work.topology
     V = jnp.asarray(work.vertices, dtype=jnp.float64)
     loop = t.boundary_loops[0]
-    shape, user_uv = _boundary_key(boundary, loop.size)
+    shape, user_uv = _boundary_key(bmap.in_loop_order(boundary, loop), loop.size)
     if shape == "plane":
         # Refuse a loop that projects to no simple polygon now, on concrete positions (the
         # boundary map itself runs inside a jit, where values are tracers).
@@ -119,7 +120,7 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
 
 
 def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="circle",
-               spacing: str = "chord", corners=None, backend: str = "auto"):
+               spacing: str = "chord", corners=None, backend: str = "auto", boundary_indices=None):
     """A convex-combination parameterization (survey §3–4, eq. (3)).
 
     **Arguments:**
@@ -130,7 +131,9 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
     - ``weights``: ``"uniform"``, ``"inverse_distance"``, ``"shape_preserving"``,
       ``"mean_value"`` or ``"harmonic"``.
     - ``boundary``: ``"circle"``, ``"square"``, ``"plane"``, a ``(k, 2)`` array of
-      UVs for the longest boundary loop, or ``{"polygon": corners}``.
+      UVs for the longest boundary loop (in :func:`jaxparam.boundary.boundary_loop`'s
+      order, or in any order with ``boundary_indices (k,)`` naming each row's vertex), a
+      mapping ``{vertex: (u, v)}`` over that loop's vertices, or ``{"polygon": corners}``.
     - ``spacing``: ``"chord"`` or ``"uniform"``; ``corners``: loop positions of
       the square's (or polygon's) corners.
 
@@ -145,6 +148,8 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
 
         uv = jp.convex_map(mesh, weights="mean_value", boundary="square")
     """
+    mesh = as_mesh(mesh, "convex_map")
+    boundary = bmap.user_boundary(boundary, boundary_indices)
     weights = choose(weights, wts.KINDS, what="weights", where="convex_map")
     symmetric = weights in wts.SYMMETRIC_KINDS
 
@@ -156,7 +161,7 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
 
 
 def least_squares_map(mesh: TriMesh, *, mu=None, boundary="circle", spacing: str = "chord",
-                      corners=None, backend: str = "auto"):
+                      corners=None, backend: str = "auto", boundary_indices=None):
     """The least-squares (spring) map of eq. (8): minimizes ``sum mu_vw |u_v - u_w|^2``.
 
     **Arguments:** ``mu``: ``(e,)`` positive edge weights in ``mesh.topology.edges``
@@ -169,6 +174,8 @@ def least_squares_map(mesh: TriMesh, *, mu=None, boundary="circle", spacing: str
 
         uv = jp.least_squares_map(mesh, mu=lambda V, E: 1 / jnp.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1))
     """
+    mesh = as_mesh(mesh, "least_squares_map")
+    boundary = bmap.user_boundary(boundary, boundary_indices)
     def w_of(work):
         E = work.topology.edges
         if mu is None:

@@ -5,6 +5,13 @@ vertex positions (and the UVs, when it carries them): the faces and the
 :class:`~jaxparam.topology.Topology` travel as static data, so a ``TriMesh``
 passes through ``jax.jit`` and ``jax.grad`` and a new mesh of the same
 connectivity reuses compiled code.
+
+UVs come in two kinds.  ``mesh.uv`` is per vertex, ``(n, 2)``: what every map of the
+library returns.  A file may also hold per-corner UVs (an OBJ's ``f a/b c/d e/f`` with
+several ``vt`` at one vertex, a texture atlas with seams): those are ``mesh.texcoords``,
+a ``(t, 2)`` table, with ``mesh.uv_faces``, ``(m, 3)`` rows into it, one per face
+corner.  When the per-corner UVs agree at every vertex the loaders give ``mesh.uv``
+instead.
 """
 from __future__ import annotations
 
@@ -44,7 +51,12 @@ class TriMesh:
     - ``vertices``: ``(n, 3)`` (or ``(n, 2)``, lifted to z = 0) float positions;
       numpy, JAX arrays and tracers are accepted.
     - ``faces``: ``(m, 3)`` integer, counter-clockwise, concrete.
-    - ``uv``: optional ``(n, 2)`` texture coordinates carried along (from an OBJ's ``vt``).
+    - ``uv``: optional ``(n, 2)`` per-vertex texture coordinates carried along (from an
+      OBJ's ``vt``, a PLY's ``u``/``v``, a glTF's ``TEXCOORD_0``).
+    - ``texcoords``, ``uv_faces``: optional per-corner UVs, given together: a ``(t, 2)``
+      float table and ``(m, 3)`` integer rows into it (corner ``k`` of face ``f`` has UV
+      ``texcoords[uv_faces[f, k]]``), as a seamed OBJ holds them.  ``texcoords`` is a pytree
+      leaf, ``uv_faces`` static.
     - ``validate``: check coordinates and face areas (needs concrete vertices; skipped for tracers).
 
     Raises :class:`MeshError` subclasses naming the offending element: non-finite
@@ -58,7 +70,7 @@ class TriMesh:
     """
 
     def __init__(self, vertices, faces, topology=None, *, uv=None, validate: bool = True,
-                 name: str | None = None):
+                 name: str | None = None, texcoords=None, uv_faces=None):
         if _is_concrete(vertices) and not isinstance(vertices, jax.Array):
             V = np.asarray(vertices)
             if V.dtype == object or not (np.issubdtype(V.dtype, np.number)):
@@ -79,18 +91,19 @@ class TriMesh:
         self.topology = topology
         self.uv = uv
         self.name = name
+        self.texcoords, self._uv_faces = _corner_uv(texcoords, uv_faces, topology.n_faces)
         if validate and _is_concrete(V):
             self._validate_geometry(np.asarray(V))
 
     # -- pytree ---------------------------------------------------------------------------
     def tree_flatten(self):
-        return (self.vertices, self.uv), (self.topology, self.name)
+        return (self.vertices, self.uv, self.texcoords), (self.topology, self.name, self._uv_faces)
 
     @classmethod
     def tree_unflatten(cls, aux, children):
         obj = object.__new__(cls)
-        obj.vertices, obj.uv = children
-        obj.topology, obj.name = aux
+        obj.vertices, obj.uv, obj.texcoords = children
+        obj.topology, obj.name, obj._uv_faces = aux
         return obj
 
     # -- convenience ----------------------------------------------------------------------
@@ -98,6 +111,11 @@ class TriMesh:
     def faces(self) -> np.ndarray:
         """``(m, 3) int64`` face array."""
         return self.topology.faces
+
+    @property
+    def uv_faces(self) -> np.ndarray | None:
+        """``(m, 3) int64`` rows of :attr:`texcoords` per face corner, or ``None``."""
+        return None if self._uv_faces is None else self._uv_faces.array
 
     @property
     def n_vertices(self) -> int:
@@ -109,9 +127,11 @@ class TriMesh:
 
     def with_vertices(self, vertices) -> "TriMesh":
         """The same connectivity with new positions (no re-validation of topology)."""
-        return TriMesh(vertices, None, self.topology, uv=self.uv, validate=False, name=self.name)
+        return TriMesh(vertices, None, self.topology, uv=self.uv, validate=False, name=self.name,
+                       texcoords=self.texcoords, uv_faces=self._uv_faces)
 
     def with_uv(self, uv) -> "TriMesh":
+        """The same mesh carrying the per-vertex ``uv: (n, 2)`` (per-corner UVs dropped)."""
         return TriMesh(self.vertices, None, self.topology, uv=uv, validate=False, name=self.name)
 
     def __repr__(self) -> str:
@@ -137,6 +157,43 @@ class TriMesh:
                 f"TriMesh: faces {first_few(zero)} have zero area (face {int(zero[0])} = "
                 f"{tuple(int(v) for v in F[zero[0]])}); collapse or remove them "
                 "(e.g. trimesh's remove_degenerate_faces), or pass validate=False to keep them.")
+
+
+class _StaticIndex:
+    """An integer array held as static pytree data: hashed and compared by identity (as a
+    ``Topology`` is), so a ``TriMesh`` with per-corner UVs passes through ``jax.jit``."""
+
+    __slots__ = ("array",)
+
+    def __init__(self, array: np.ndarray):
+        self.array = array
+
+
+def _corner_uv(texcoords, uv_faces, m: int):
+    """Check and hold per-corner UVs: ``(texcoords (t, 2), _StaticIndex((m, 3)))`` or ``(None, None)``."""
+    if texcoords is None and uv_faces is None:
+        return None, None
+    if texcoords is None or uv_faces is None:
+        raise MeshError("TriMesh: per-corner UVs need both texcoords (t, 2) and uv_faces (m, 3); "
+                        f"got only {'uv_faces' if texcoords is None else 'texcoords'}.")
+    if isinstance(uv_faces, _StaticIndex):
+        return texcoords, uv_faces
+    T = np.asarray(uv_faces)
+    if T.shape != (m, 3) or not np.issubdtype(T.dtype, np.integer):
+        raise MeshError(f"TriMesh: uv_faces must be an (m, 3) = ({m}, 3) integer array, one row "
+                        f"per face, got shape {T.shape} of dtype {T.dtype}.")
+    if _is_concrete(texcoords) and not isinstance(texcoords, jax.Array):
+        texcoords = np.asarray(texcoords, np.float64)
+    if texcoords.ndim != 2 or texcoords.shape[1] != 2:
+        raise MeshError(f"TriMesh: texcoords must have shape (t, 2), got {tuple(texcoords.shape)}.")
+    bad = np.flatnonzero((T < 0).any(1) | (T >= texcoords.shape[0]).any(1))
+    if bad.size:
+        raise MeshError(f"TriMesh: uv_faces rows {first_few(bad)} point outside texcoords "
+                        f"(row {int(bad[0])} = {tuple(int(v) for v in T[bad[0]])}, "
+                        f"{texcoords.shape[0]} texcoords).")
+    T = T.astype(np.int64)
+    T.setflags(write=False)
+    return texcoords, _StaticIndex(T)
 
 
 def grid_faces(nu: int, nv: int) -> np.ndarray:

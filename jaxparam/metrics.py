@@ -21,6 +21,7 @@ import numpy as np
 from . import boundary as bmap
 from . import geometry as geo
 from . import weights as wts
+from .io import as_mesh
 
 __all__ = ["DistortionReport", "Theorem1", "distortion", "face_distortion", "flips",
            "boundary_overlaps", "theorem1"]
@@ -178,6 +179,7 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
         rep = jp.distortion(mesh, uv)
         rep.flips, rep.sym_dirichlet, rep.max_aspect
     """
+    mesh = as_mesh(mesh, "distortion")
     fd = face_distortion(mesh, uv)
     s1 = np.asarray(fd["s1"])
     s2 = np.asarray(fd["s2"])

@@ -38,6 +38,8 @@ import numpy as np
 from .errors import MeshError, first_few
 from .disk import disk_check
 from .mesh import TriMesh, concrete_values
+from .io import as_mesh
+from .optimize import minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
 from .triangles import barycentric, locate, signed_area2
 
@@ -306,6 +308,7 @@ def remesh(mesh: TriMesh, uv, levels: int = 4, *, base_faces: int = 6, corners=N
             return jnp.sum(jp.remesh(m, jp.convex_map(m), levels=3).mesh.vertices[:, 2] ** 2)
         jax.grad(loss)(mesh.vertices)
     """
+    mesh = as_mesh(mesh, "remesh")
     if corners is not None and base_faces != 6:
         raise MeshError("remesh: pass base_faces or corners, not both (corners is base_faces' "
                         "alias that also takes positions in the boundary loop).")

@@ -85,3 +85,33 @@ def test_truncated_valid_files(tmp_path, cut):
     p = tmp_path / "full.obj"
     jp.save(p, mesh)
     check(tmp_path, "cut.obj", p.read_bytes()[:cut])
+
+
+PLY_UV_HEAD = ("ply\nformat {fmt} 1.0\nelement vertex {nv}\nproperty double x\nproperty double y\n"
+               "property double z\nproperty float u\nproperty float v\nelement face {nf}\n"
+               "property list uchar int vertex_indices\nproperty list uchar float texcoord\nend_header\n")
+
+
+@SETTINGS
+@given(fmt=st.sampled_from(["ascii", "binary_little_endian", "binary_big_endian", "binary_middle"]),
+       nv=st.sampled_from(["0", "1", "3", "4", "-2", "x"]), nf=st.sampled_from(["0", "1", "2", "-1"]),
+       body=st.binary(max_size=200))
+def test_ply_with_uvs_and_random_bodies_never_crash(tmp_path, fmt, nv, nf, body):
+    """jaxparam's own PLY reader (vertex u/v, face texcoord lists) on random data after a
+    valid header."""
+    check(tmp_path, "u.ply", PLY_UV_HEAD.format(fmt=fmt, nv=nv, nf=nf).encode() + body)
+
+
+@SETTINGS
+@given(text=lines)
+def test_ascii_ply_with_uvs_never_crashes(tmp_path, text):
+    check(tmp_path, "a.ply", (PLY_UV_HEAD.format(fmt="ascii", nv=3, nf=1) + text).encode())
+
+
+@SETTINGS
+@given(cut=st.integers(0, 2000), ext=st.sampled_from(["ply", "glb", "obj"]))
+def test_truncated_files_of_every_written_format(tmp_path, cut, ext):
+    mesh = jp.shapes.plane_grid(3, 3)
+    p = tmp_path / f"full.{ext}"
+    jp.save(p, mesh, np.asarray(mesh.vertices)[:, :2])
+    check(tmp_path, f"cut.{ext}", p.read_bytes()[:cut])

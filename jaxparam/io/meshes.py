@@ -1,171 +1,80 @@
-"""Reading and writing triangle mesh files: OBJ and OFF by jaxparam's own readers, other
-formats through ``trimesh``; OBJ out, with per-vertex texture coordinates.
+"""Reading and writing triangle mesh files in the format the extension names.
 
-Readers keep the file's vertex order (no merging, no reordering), so a mesh's UVs
-line up with its file.  Every file is written through
-:func:`jaxparam.io.files.atomic_write`.
+=========  ======================================  =======================================
+format     UVs                                     written by
+=========  ======================================  =======================================
+``.obj``   per-vertex or per-corner ``vt``         jaxparam (:mod:`.obj`: exact, 17 digits)
+``.ply``   ``u v`` per vertex, face ``texcoord``   jaxparam (:mod:`.ply`: binary, doubles)
+``.glb``   ``TEXCOORD_0``, optional texture image  trimesh (:mod:`.gltf`: float32)
+``.gltf``  as ``.glb``, buffers embedded           trimesh (:mod:`.gltf`)
+``.off``   none (a warning says they are dropped)  jaxparam (:mod:`.off`: exact)
+=========  ======================================  =======================================
+
+Readers keep the file's vertex order (no merging, no reordering), so a mesh's UVs line up
+with its file; ``.stl`` and other formats trimesh knows are read too.  Every file is written
+through :func:`jaxparam.io.files.atomic_write`.
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import MeshError, MeshFileError
 from ..mesh import TriMesh
-from .files import atomic_write, existing_file, read_text
+from .files import atomic_write, existing_file
+from .gltf import gltf_bytes, read_gltf
+from .interop import as_mesh, split_seams, to_trimesh
+from .obj import corner_to_vertex_uv, parse_obj, read_obj, write_obj
+from .off import read_off, write_off
+from .ply import read_ply, write_ply
 
-__all__ = ["read_obj", "read_off", "load", "save"]
+__all__ = ["read_obj", "read_off", "read_ply", "load", "save", "check_output_format",
+           "WRITE_FORMATS"]
 
-
-def _number(tok: str, path, line_no: int, what: str) -> float:
-    """``tok`` as a float, or a :class:`MeshFileError` naming the file, line and ``what``."""
-    try:
-        return float(tok)
-    except ValueError:
-        raise MeshFileError(f"{path}, line {line_no}: cannot read {what} from {tok!r}; "
-                            "the file is malformed.") from None
-
-
-def _numbers(tokens, count: int, path, line_no: int, what: str, too_few: str) -> list[float]:
-    """The first ``count`` of ``tokens`` as floats; a :class:`MeshFileError` saying
-    ``too_few`` when there are fewer, or naming ``what`` could not be read."""
-    if len(tokens) < count:
-        raise MeshFileError(f"{path}, line {line_no}: {too_few}")
-    return [_number(t, path, line_no, what) for t in tokens[:count]]
+#: The extensions :func:`save` writes, and what each keeps.
+WRITE_FORMATS = {".obj": "OBJ (per-vertex or per-corner vt)", ".ply": "PLY (u, v)",
+                 ".glb": "binary glTF (TEXCOORD_0, texture)", ".gltf": "glTF (TEXCOORD_0, texture)",
+                 ".off": "OFF (no UVs)"}
 
 
-def read_obj(path):
-    """Read an OBJ file keeping the vertex order: ``(vertices, faces, uv_or_None)``,
-    ``(n, 3) float64``, ``(m, 3) int64`` (0-based) and ``(n, 2) float64`` or None.
+def check_output_format(path) -> str:
+    """The format :func:`save` would write to ``path``: its lower-case extension (``".obj"``,
+    ``".ply"``, ``".glb"``, ``".gltf"``, ``".off"``).
 
-    Polygons are split into triangle fans; negative (relative) indices are
-    honoured; ``vt`` coordinates become per-vertex UVs when every face corner
-    of a vertex uses the same one.
+    Raises :class:`MeshFileError` naming the extension and the supported ones for any other;
+    call it before long work (the CLI does, right after parsing its options).
+
+    Example::
+
+        jp.io.check_output_format("out.stl")   # MeshFileError: cannot write '.stl' ...
     """
-    verts, tex, faces, ftex = [], [], [], []
-    text = read_text(path)
-    for line_no, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        parts = line.split()
-        tag = parts[0]
-        if tag == "v":
-            verts.append(_numbers(parts[1:], 3, path, line_no, "a coordinate",
-                                  f"a vertex needs three coordinates, got {len(parts) - 1}."))
-        elif tag == "vt":
-            tex.append(_numbers(parts[1:], 2, path, line_no, "a texture coordinate",
-                                "a texture coordinate needs two values."))
-        elif tag == "f":
-            if len(parts) < 4:
-                raise MeshFileError(f"{path}, line {line_no}: a face needs at least three vertices, "
-                                    f"got {len(parts) - 1}.")
-            vi, ti = [], []
-            for tok in parts[1:]:
-                fields = tok.split("/")
-                vi.append(_obj_index(fields[0], len(verts), path, line_no))
-                if len(fields) > 1 and fields[1]:
-                    ti.append(_obj_index(fields[1], len(tex), path, line_no))
-            for k in range(1, len(vi) - 1):
-                faces.append([vi[0], vi[k], vi[k + 1]])
-                ftex.append([ti[0], ti[k], ti[k + 1]] if len(ti) == len(vi) else None)
-    if not verts:
-        raise MeshFileError(f"{path}: no vertices ('v' lines) found; is this an OBJ mesh file?")
-    if not faces:
-        raise MeshFileError(f"{path}: no faces ('f' lines) found; jaxparam needs a triangle mesh "
-                            "(for bare points use jaxparam meshless).")
-    V = np.asarray(verts, np.float64)
-    F = np.asarray(faces, np.int64)
-    uv = None
-    if tex and all(t is not None for t in ftex):
-        T = np.asarray(ftex, np.int64)
-        uv_all = np.asarray(tex, np.float64)
-        uv = np.full((V.shape[0], 2), np.nan)
-        uv[F.reshape(-1)] = uv_all[T.reshape(-1)]
-        # Only a true per-vertex parameterization is kept (no seams).
-        consistent = np.all(uv_all[T.reshape(-1)] == uv[F.reshape(-1)])
-        if not consistent:
-            uv = None
-    return V, F, uv
-
-
-def _obj_index(tok: str, count: int, path, line_no: int) -> int:
-    """The 0-based index of an OBJ (1-based, or negative: relative) index among ``count``."""
-    try:
-        i = int(tok)
-    except ValueError:
-        raise MeshFileError(f"{path}, line {line_no}: bad index {tok!r}; the file is malformed.") from None
-    if i < 0:
-        i = count + i + 1
-    if i < 1 or i > count:
-        raise MeshFileError(f"{path}, line {line_no}: index {tok} refers to element {i} but only "
-                            f"{count} are defined before this line.")
-    return i - 1
-
-
-def read_off(path):
-    """Read an OFF file keeping the vertex order: ``(vertices, faces)``, ``(n, 3) float64`` and
-    ``(m, 3) int64``; polygons are split into triangle fans."""
-    text = read_text(path)
-    tokens_by_line = []
-    for line_no, raw in enumerate(text.splitlines(), 1):
-        line = raw.split("#", 1)[0].strip()
-        if line:
-            tokens_by_line.append((line_no, line.split()))
-    if not tokens_by_line:
-        raise MeshFileError(f"{path}: the file is empty.")
-    line_no, first = tokens_by_line[0]
-    if not first[0].upper().endswith("OFF"):
-        raise MeshFileError(f"{path}, line {line_no}: expected the header 'OFF', got {first[0]!r}.")
-    rest = [(ln, toks) for ln, toks in ([(line_no, first[1:])] if len(first) > 1 else []) + tokens_by_line[1:]]
-    if not rest:
-        raise MeshFileError(f"{path}: missing the counts line 'nv nf ne' after the header.")
-    ln, counts = rest[0]
-    try:
-        nv, nf = int(counts[0]), int(counts[1])
-    except (ValueError, IndexError):
-        raise MeshFileError(f"{path}, line {ln}: expected the counts 'nv nf ne', got {' '.join(counts)!r}.") from None
-    if nv < 0 or nf < 0:
-        raise MeshFileError(f"{path}, line {ln}: negative counts {nv} {nf}.")
-    body = rest[1:]
-    if len(body) < nv + nf:
-        raise MeshFileError(f"{path}: the header promises {nv} vertices and {nf} faces but the file has "
-                            f"only {len(body)} data lines; the file is truncated or the counts are wrong.")
-    V = np.empty((nv, 3))
-    for i in range(nv):
-        ln, toks = body[i]
-        V[i] = _numbers(toks, 3, path, ln, "a coordinate",
-                        f"a vertex needs three coordinates, got {len(toks)}.")
-    faces = []
-    for j in range(nf):
-        ln, toks = body[nv + j]
-        try:
-            k = int(toks[0])
-            idx = [int(t) for t in toks[1:1 + k]]
-        except (ValueError, IndexError):
-            raise MeshFileError(f"{path}, line {ln}: cannot read a face from {' '.join(toks)!r}.") from None
-        if k < 3 or len(idx) != k:
-            raise MeshFileError(f"{path}, line {ln}: a face with {k} vertices but {len(idx)} indices given.")
-        bad = [i for i in idx if i < 0 or i >= nv]
-        if bad:
-            raise MeshFileError(f"{path}, line {ln}: vertex index {bad[0]} is out of range [0, {nv}).")
-        faces.extend([idx[0], idx[t], idx[t + 1]] for t in range(1, k - 1))
-    if not faces:
-        raise MeshFileError(f"{path}: the file has no faces.")
-    return V, np.asarray(faces, np.int64)
+    ext = Path(path).suffix.lower()
+    if Path(path).is_dir():
+        raise MeshFileError(f"{path}: is a folder; give a file path ending in one of "
+                            f"{', '.join(WRITE_FORMATS)}.")
+    if ext not in WRITE_FORMATS:
+        named = f"the extension {ext!r}" if ext else "a file without an extension"
+        raise MeshFileError(f"{path}: cannot write {named}; jaxparam writes "
+                            f"{', '.join(WRITE_FORMATS)} (give the output one of those).")
+    return ext
 
 
 def load(path, *, validate: bool = True) -> TriMesh:
-    """Read a triangle mesh file, keeping the vertex order.
+    """Read a triangle mesh file, keeping the vertex order, with its UVs.
 
-    OBJ and OFF are read by jaxparam's own readers (no merging or reordering;
-    an OBJ's per-vertex ``vt`` becomes ``mesh.uv``); PLY, STL, GLB and other
-    formats go through ``trimesh`` with ``process=False`` (STL stores
-    triangle soup, so its coincident corners are merged, in first-seen order).
+    OBJ, OFF and PLY are read by jaxparam's own readers, glTF/GLB through trimesh (node
+    transforms applied, meshes concatenated), STL and other formats through ``trimesh``
+    with ``process=False`` (STL stores triangle soup, so its coincident corners are
+    merged, in first-seen order).  UVs: an OBJ's ``vt``, a PLY's ``u``/``v`` (``s``/``t``,
+    ``texture_u``/``texture_v``) or face ``texcoord``, a glTF's ``TEXCOORD_0``.  UVs that
+    agree at every vertex become ``mesh.uv (n, 2)``; seamed (per-corner) ones
+    ``mesh.texcoords (t, 2)`` and ``mesh.uv_faces (m, 3)``.  An OBJ whose faces only
+    partly carry ``vt`` loads without UVs and warns.
 
-    Raises :class:`MeshFileError` for a missing or malformed file (with the
-    line) and :class:`MeshError` for an invalid mesh.
+    Raises :class:`MeshFileError` for a missing or malformed file (with the line) and
+    :class:`MeshError` for an invalid mesh.
 
     Example::
 
@@ -173,18 +82,29 @@ def load(path, *, validate: bool = True) -> TriMesh:
     """
     p = Path(path)
     ext = p.suffix.lower()
-    uv = None
+    uv = tex = T = None
     if ext == ".obj":
-        V, F, uv = read_obj(p)
+        V, F, tex, T, dropped = parse_obj(p)
+        if dropped:
+            warnings.warn(f"{path}: {dropped} of the faces have no vt indices, so the file's "
+                          "texture coordinates were not loaded (mesh.uv is None).", stacklevel=2)
     elif ext == ".off":
         V, F = read_off(p)
+    elif ext == ".ply":
+        V, F, uv, tex, T = read_ply(p)
+    elif ext in (".glb", ".gltf"):
+        V, F, uv = read_gltf(p)
     else:
         V, F = _read_with_trimesh(p, ext)
-    return TriMesh(V, F, uv=uv, validate=validate, name=p.stem)
+    if tex is not None and uv is None:
+        uv = corner_to_vertex_uv(F, tex, T, V.shape[0])
+        if uv is not None:
+            tex = T = None
+    return TriMesh(V, F, uv=uv, validate=validate, name=p.stem, texcoords=tex, uv_faces=T)
 
 
 def _read_with_trimesh(p: Path, ext: str):
-    """``(vertices, faces)`` of a PLY, STL, GLB, ... file read by ``trimesh``."""
+    """``(vertices, faces)`` of an STL, ... file read by ``trimesh``."""
     existing_file(p)
     if p.stat().st_size == 0:
         raise MeshFileError(f"{p}: the file is empty.")
@@ -202,32 +122,89 @@ def _read_with_trimesh(p: Path, ext: str):
     return V, F
 
 
-def save(path, mesh: TriMesh, uv=None) -> None:
-    """Write ``mesh`` (and ``uv: (n, 2)``) as OBJ: ``v``, per-vertex ``vt``, faces ``f a/a b/b c/c``.
+def _uvs(mesh: TriMesh, uv, uv_faces):
+    """``(uv (n, 2) or None, texcoords (t, 2) or None, uv_faces (m, 3) or None)`` to write."""
+    n, m = mesh.n_vertices, mesh.n_faces
+    if uv_faces is not None:
+        T = np.asarray(uv_faces)
+        if uv is None:
+            raise MeshError("save: uv_faces needs uv, the (t, 2) table of texture coordinates it "
+                            "indexes.")
+        tex = np.asarray(uv, np.float64)
+        if tex.ndim != 2 or tex.shape[1] != 2:
+            raise MeshError(f"save: with uv_faces, uv must be a (t, 2) table, got {tex.shape}.")
+        if T.shape != (m, 3) or not np.issubdtype(T.dtype, np.integer):
+            raise MeshError(f"save: uv_faces must be ({m}, 3) integers, one row per face, got "
+                            f"{T.shape} {T.dtype}.")
+        if T.size and (T.min() < 0 or T.max() >= tex.shape[0]):
+            raise MeshError(f"save: uv_faces index {int(T.max() if T.max() >= tex.shape[0] else T.min())}"
+                            f" is outside the uv table of {tex.shape[0]} rows.")
+        return None, tex, T.astype(np.int64)
+    if uv is None:
+        uv = mesh.uv
+        if uv is None and mesh.texcoords is not None:
+            return None, np.asarray(mesh.texcoords, np.float64), mesh.uv_faces
+    if uv is None:
+        return None, None, None
+    uv = np.asarray(uv, np.float64)
+    if uv.shape != (n, 2):
+        raise MeshError(f"save: uv must have shape ({n}, 2), one row per vertex, got {uv.shape} "
+                        "(per-corner UVs: pass the (t, 2) table as uv with uv_faces=(m, 3)).")
+    return uv, None, None
 
-    Vertices keep the mesh's order.  The file is written to a temporary name
-    and renamed, so it never exists half-written.
+
+def save(path, mesh, uv=None, *, uv_faces=None, texture=None) -> None:
+    """Write ``mesh`` with its UVs in the format ``path``'s extension names (table above).
+
+    **Arguments:**
+
+    - ``mesh``: a :class:`TriMesh` (or what :func:`~jaxparam.io.interop.as_mesh` takes).
+    - ``uv``: ``(n, 2)`` per-vertex UVs (default ``mesh.uv``, else the mesh's per-corner
+      UVs); with ``uv_faces``, the ``(t, 2)`` table of per-corner UVs.
+    - ``uv_faces``: ``(m, 3)`` rows of ``uv`` per face corner (OBJ ``f v/vt``; PLY face
+      ``texcoord``; glTF splits vertices at seams, since it has one UV per vertex).
+    - ``texture``: an ``(H, W, 3)`` uint8 image embedded as the base colour of a
+      ``.glb``/``.gltf`` (e.g. :func:`jaxparam.io.checker_texture`).
+
+    Vertices keep the mesh's order in every format (glTF with seams aside).  ``.off`` holds
+    no UVs: given some, it warns that they are not written.  The file is written to a
+    temporary name and renamed, so it never exists half-written.  Raises
+    :class:`MeshFileError` for an extension jaxparam cannot write (before anything else)
+    and :class:`MeshError` for UVs of the wrong shape.
 
     Example::
 
         jp.save("out.obj", mesh, uv)
+        jp.save("out.glb", mesh, uv, texture=jp.io.checker_texture())
     """
+    ext = check_output_format(path)
+    mesh = as_mesh(mesh, "save")
     V = np.asarray(mesh.vertices, np.float64)
-    F = mesh.faces + 1
-    if uv is None:
-        uv = mesh.uv
-    if uv is not None:
-        uv = np.asarray(uv, np.float64)
-        if uv.shape != (V.shape[0], 2):
-            raise MeshError(f"save: uv must have shape ({V.shape[0]}, 2), got {uv.shape}.")
-
-    def write(f):
-        f.write("# written by jaxparam\n")
-        np.savetxt(f, V, fmt="v %.17g %.17g %.17g")
-        if uv is not None:
-            np.savetxt(f, np.nan_to_num(uv), fmt="vt %.17g %.17g")
-            np.savetxt(f, np.repeat(F, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
-        else:
-            np.savetxt(f, F, fmt="f %d %d %d")
-
-    atomic_write(path, write)
+    F = np.asarray(mesh.faces, np.int64)
+    uv, tex, T = _uvs(mesh, uv, uv_faces)
+    if texture is not None:
+        if ext not in (".glb", ".gltf"):
+            raise MeshFileError(f"{path}: a texture image is embedded only in .glb or .gltf; "
+                                f"save the image next to the {ext} yourself, or write a .glb.")
+        img = np.asarray(texture)
+        if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+            raise MeshError(f"save: texture must be an (H, W, 3) uint8 image, got shape "
+                            f"{img.shape} of dtype {img.dtype}.")
+        if uv is None and tex is None:
+            raise MeshError("save: a texture needs UVs to be drawn through; pass uv.")
+    if ext == ".obj":
+        atomic_write(path, lambda f: write_obj(f, V, F, uv, tex, T))
+    elif ext == ".ply":
+        atomic_write(path, lambda f: write_ply(f, V, F, uv, tex, T), mode="wb")
+    elif ext == ".off":
+        if uv is not None or tex is not None:
+            warnings.warn(f"save: {path}: OFF holds no texture coordinates, so the UVs were not "
+                          "written; use .obj, .ply or .glb to keep them.", stacklevel=2)
+        atomic_write(path, lambda f: write_off(f, V, F))
+    else:
+        if tex is not None:
+            source, F, uv = split_seams(F, tex, T)
+            V = V[source]
+        tm = to_trimesh(TriMesh(V, F, validate=False, name=mesh.name), uv, texture=texture)
+        data = gltf_bytes(tm, binary=ext == ".glb")
+        atomic_write(path, lambda f: f.write(data), mode="wb")

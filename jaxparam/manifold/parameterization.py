@@ -12,6 +12,7 @@ from .. import weights as wts
 from ..options import choose
 from ..errors import MeshError, SolverError, TopologyError
 from ..mesh import TriMesh
+from ..io import as_mesh
 from ..remesh import Remesh
 from ..subdivision import dyadic_hierarchy, split_corner_values
 from ..triangles import locate
@@ -242,6 +243,7 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
         # d(remesh) / d(mesh positions), the combinatorics fixed:
         g = jax.grad(lambda V: loss(param.with_vertices(V).remesh(2).mesh.vertices))(V0)
     """
+    mesh = as_mesh(mesh, "manifold_map")
     if _traced(mesh.vertices):
         raise MeshError("manifold_map: the mesh's vertices are traced (under jax.grad, jit or vmap), "
                         "but the base domain, surface paths and charts' connectivity need concrete "

@@ -14,6 +14,7 @@ from .. import geometry as geo
 from .. import metrics
 from .. import tol
 from ..errors import MeshError, SolverError
+from ..io import as_mesh
 from .base import Solver, StopRules
 from .implicit import is_traced, minimize_traced
 from .problem import Problem
@@ -128,6 +129,7 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
         res = jp.minimize(mesh, "symmetric_dirichlet", free_boundary=True)
         res.uv, res.energy, res.iterations
     """
+    mesh = as_mesh(mesh, "minimize")
     from ..linear import convex_map, disk_check
 
     en = en_mod.get(energy)

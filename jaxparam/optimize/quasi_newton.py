@@ -237,10 +237,28 @@ class BFGS(OptimistixSolver):
     """optimistix's dense BFGS (``"bfgs"``, small meshes only), as :class:`OptimistixSolver`
     says.
 
-    **Fields:** ``rtol``, ``atol``, ``patience`` (:class:`OptimistixSolver`).
+    **Fields:** ``max_dofs`` (the most unknowns, 2 per free vertex, it accepts: 4000, whose
+    dense ``n x n`` float64 inverse-Hessian estimate takes 128 MB; a 22k-face mesh would need
+    about 4 GB and minutes per step), and ``rtol``, ``atol``, ``patience``
+    (:class:`OptimistixSolver`).  Larger problems raise :class:`SolverError` naming the
+    solvers that scale: ``"newton"`` (sparse) and ``"lbfgs"`` (``O(n)`` memory).
     """
 
     name: ClassVar[str] = "bfgs"
+
+    max_dofs: int = 4000
+
+    def run(self, problem: Problem, stop: StopRules, *, verbose: bool = False) -> SolveResult:
+        n = 2 * int(np.size(problem.free))
+        if n > self.max_dofs:
+            raise SolverError(
+                f"minimize: solver='bfgs' keeps a dense {n} x {n} inverse-Hessian estimate for "
+                f"{n // 2} free vertices: {8 * n * n / 1e9:.2g} GB in float64 (and as much again "
+                f"while updating it); it takes at most {self.max_dofs} unknowns "
+                f"({8 * self.max_dofs ** 2 / 1e6:.0f} MB).  Use solver='newton' (sparse projected "
+                "Newton, the default) or solver='lbfgs' (O(n) memory), or BFGS(max_dofs=...) to "
+                "insist.", stage="solver")
+        return super().run(problem, stop, verbose=verbose)
 
     def minimiser(self, descent):
         from .optimistix_minimisers import FlipFreeBFGS

@@ -1,0 +1,134 @@
+"""OBJ meshes, read and written by jaxparam: ``v``, ``vt`` and ``f`` lines, per-vertex or
+per-corner texture coordinates (``f a/b c/d e/f``).
+
+Why our own writer: trimesh's OBJ exporter writes positions and UVs with 8 decimals (a
+round trip moves them) and only per-vertex UVs (its ``TextureVisuals`` hold one UV per
+vertex, so a seamed atlas cannot be written without splitting vertices); ours keeps the
+vertex order, writes 17 significant digits (exact) and per-corner ``vt`` when asked.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MeshFileError
+from .files import read_text
+
+__all__ = ["parse_obj", "read_obj", "write_obj", "corner_to_vertex_uv", "read_number_fields"]
+
+
+def _number(tok: str, path, line_no: int, what: str) -> float:
+    """``tok`` as a float, or a :class:`MeshFileError` naming the file, line and ``what``."""
+    try:
+        return float(tok)
+    except ValueError:
+        raise MeshFileError(f"{path}, line {line_no}: cannot read {what} from {tok!r}; "
+                            "the file is malformed.") from None
+
+
+def read_number_fields(tokens, count: int, path, line_no: int, what: str, too_few: str) -> list[float]:
+    """The first ``count`` of ``tokens`` as floats; a :class:`MeshFileError` saying
+    ``too_few`` when there are fewer, or naming ``what`` could not be read."""
+    if len(tokens) < count:
+        raise MeshFileError(f"{path}, line {line_no}: {too_few}")
+    return [_number(t, path, line_no, what) for t in tokens[:count]]
+
+
+def parse_obj(path):
+    """An OBJ file's data in file order: ``(vertices (n, 3), faces (m, 3), vt (t, 2) or None,
+    uv_faces (m, 3) or None, dropped)``; polygons split into triangle fans.  ``uv_faces`` are
+    the faces' ``vt`` indices when every face has them; ``dropped`` counts faces without
+    ``vt`` in a file that has some (their UVs cannot be kept)."""
+    verts, tex, faces, ftex = [], [], [], []
+    text = read_text(path)
+    for line_no, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = line.split()
+        tag = parts[0]
+        if tag == "v":
+            verts.append(read_number_fields(parts[1:], 3, path, line_no, "a coordinate",
+                                  f"a vertex needs three coordinates, got {len(parts) - 1}."))
+        elif tag == "vt":
+            tex.append(read_number_fields(parts[1:], 2, path, line_no, "a texture coordinate",
+                                "a texture coordinate needs two values."))
+        elif tag == "f":
+            if len(parts) < 4:
+                raise MeshFileError(f"{path}, line {line_no}: a face needs at least three vertices, "
+                                    f"got {len(parts) - 1}.")
+            vi, ti = [], []
+            for tok in parts[1:]:
+                fields = tok.split("/")
+                vi.append(_obj_index(fields[0], len(verts), path, line_no))
+                if len(fields) > 1 and fields[1]:
+                    ti.append(_obj_index(fields[1], len(tex), path, line_no))
+            for k in range(1, len(vi) - 1):
+                faces.append([vi[0], vi[k], vi[k + 1]])
+                ftex.append([ti[0], ti[k], ti[k + 1]] if len(ti) == len(vi) else None)
+    if not verts:
+        raise MeshFileError(f"{path}: no vertices ('v' lines) found; is this an OBJ mesh file?")
+    if not faces:
+        raise MeshFileError(f"{path}: no faces ('f' lines) found; jaxparam needs a triangle mesh "
+                            "(for bare points use jaxparam meshless).")
+    V = np.asarray(verts, np.float64)
+    F = np.asarray(faces, np.int64)
+    missing = sum(t is None for t in ftex)
+    if not tex or missing:
+        return V, F, None, None, missing if tex and missing < len(ftex) else 0
+    return V, F, np.asarray(tex, np.float64), np.asarray(ftex, np.int64), 0
+
+
+def corner_to_vertex_uv(F, texcoords, uv_faces, n: int):
+    """Per-corner UVs as per-vertex ``uv: (n, 2)`` when every corner of each vertex has the
+    same UV (``nan`` for vertices in no face), else ``None`` (the UVs have seams)."""
+    per_corner = texcoords[uv_faces.reshape(-1)]
+    uv = np.full((n, 2), np.nan)
+    uv[F.reshape(-1)] = per_corner
+    return uv if np.array_equal(uv[F.reshape(-1)], per_corner) else None
+
+
+def read_obj(path):
+    """Read an OBJ file keeping the vertex order: ``(vertices, faces, uv_or_None)``,
+    ``(n, 3) float64``, ``(m, 3) int64`` (0-based) and ``(n, 2) float64`` or None.
+
+    Polygons are split into triangle fans; negative (relative) indices are
+    honoured; ``vt`` coordinates become per-vertex UVs when every face corner
+    of a vertex uses the same one (per-corner UVs: :func:`parse_obj`, or ``jp.load``,
+    which keeps them as ``mesh.texcoords`` and ``mesh.uv_faces``).
+    """
+    V, F, tex, T, _ = parse_obj(path)
+    uv = None if tex is None else corner_to_vertex_uv(F, tex, T, V.shape[0])
+    return V, F, uv
+
+
+def write_obj(f, V, F, uv=None, texcoords=None, uv_faces=None) -> None:
+    """Write OBJ text to the open file ``f``: ``v`` lines (17 significant digits, exact),
+    then per-vertex ``vt`` with faces ``f a/a b/b c/c`` for ``uv (n, 2)``, or the ``vt``
+    table ``texcoords (t, 2)`` with faces ``f a/x b/y c/z`` for per-corner UVs, or bare
+    ``f a b c``.  ``nan`` UVs (vertices in no face) are written as 0."""
+    f.write("# written by jaxparam\n")
+    np.savetxt(f, V, fmt="v %.17g %.17g %.17g")
+    F1 = F + 1
+    if uv is not None:
+        np.savetxt(f, np.nan_to_num(uv), fmt="vt %.17g %.17g")
+        np.savetxt(f, np.repeat(F1, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+    elif texcoords is not None:
+        np.savetxt(f, np.nan_to_num(texcoords), fmt="vt %.17g %.17g")
+        pairs = np.stack([F1, uv_faces + 1], axis=2).reshape(-1, 6)
+        np.savetxt(f, pairs, fmt="f %d/%d %d/%d %d/%d")
+    else:
+        np.savetxt(f, F1, fmt="f %d %d %d")
+
+
+def _obj_index(tok: str, count: int, path, line_no: int) -> int:
+    """The 0-based index of an OBJ (1-based, or negative: relative) index among ``count``."""
+    try:
+        i = int(tok)
+    except ValueError:
+        raise MeshFileError(f"{path}, line {line_no}: bad index {tok!r}; the file is malformed.") from None
+    if i < 0:
+        i = count + i + 1
+    if i < 1 or i > count:
+        raise MeshFileError(f"{path}, line {line_no}: index {tok} refers to element {i} but only "
+                            f"{count} are defined before this line.")
+    return i - 1

@@ -1,0 +1,297 @@
+"""Every format jp.save writes round-trips through trimesh and through jp.load: vertex order,
+faces and UVs exact (glTF: exact to float32, the only precision the format has)."""
+import warnings
+
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from jaxparam import io
+from jaxparam.errors import MeshError, MeshFileError
+
+trimesh = pytest.importorskip("trimesh")
+
+FORMATS = [".obj", ".ply", ".glb", ".gltf"]
+F32 = {".glb", ".gltf"}       # glTF stores float32 positions and UVs
+
+
+@pytest.fixture(scope="module")
+def mesh_uv():
+    mesh = jp.shapes.disk(4, seed=2, height=0.3)
+    rng = np.random.default_rng(5)
+    # Distinct UVs with full float64 mantissas, so a lossy writer cannot pass.
+    return mesh, rng.random((mesh.n_vertices, 2)) * 3 - 1
+
+
+def seamed(mesh):
+    """Per-corner UVs with a seam: every face gets its own three texcoords, shifted per face."""
+    m = mesh.n_faces
+    uv_faces = np.arange(3 * m).reshape(m, 3)
+    tex = np.asarray(mesh.vertices)[mesh.faces.reshape(-1), :2] + np.repeat(np.arange(m), 3)[:, None] * 1e-3
+    return tex, uv_faces
+
+
+def close(a, b, ext):
+    if ext in F32:
+        np.testing.assert_allclose(a, np.asarray(b, np.float32), rtol=0, atol=2e-7 * max(1, np.abs(b).max()))
+    else:
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("ext", FORMATS)
+def test_round_trip_through_jaxparam(tmp_path, mesh_uv, ext):
+    mesh, uv = mesh_uv
+    p = tmp_path / f"m{ext}"
+    jp.save(p, mesh, uv)
+    back = jp.load(p)
+    np.testing.assert_array_equal(back.faces, mesh.faces)
+    close(back.vertices, np.asarray(mesh.vertices), ext)
+    assert back.uv is not None and back.texcoords is None
+    close(back.uv, uv, ext)
+
+
+@pytest.mark.parametrize("ext", FORMATS)
+def test_round_trip_through_trimesh(tmp_path, mesh_uv, ext):
+    """What we write, trimesh reads (process=False) with the same vertex order and its UVs; and
+    what trimesh writes for the same mesh, we read the same way."""
+    mesh, uv = mesh_uv
+    p = tmp_path / f"m{ext}"
+    jp.save(p, mesh, uv)
+    t = trimesh.load(p, process=False, force="mesh")
+    np.testing.assert_array_equal(t.faces, mesh.faces)
+    close(t.vertices, np.asarray(mesh.vertices), ext)
+    close(np.asarray(t.visual.uv), uv, ext)
+    q = tmp_path / f"t{ext}"
+    io.to_trimesh(mesh, uv).export(q)
+    back = jp.load(q)
+    np.testing.assert_array_equal(back.faces, mesh.faces)
+    # trimesh's own PLY and OBJ exporters are float32 / 8 decimals: compare to that precision.
+    np.testing.assert_allclose(back.vertices, mesh.vertices, atol=1e-6)
+    np.testing.assert_allclose(back.uv, uv, atol=1e-6)
+
+
+def test_trimesh_off_round_trip(tmp_path, mesh_uv):
+    mesh, uv = mesh_uv
+    p = tmp_path / "m.off"
+    with pytest.warns(UserWarning, match=r"OFF holds no texture coordinates.*not written"):
+        jp.save(p, mesh, uv)
+    t = trimesh.load(p, process=False)
+    np.testing.assert_array_equal(t.faces, mesh.faces)
+    np.testing.assert_allclose(t.vertices, mesh.vertices, rtol=1e-12)
+    back = jp.load(p)
+    np.testing.assert_array_equal(back.vertices, np.asarray(mesh.vertices))
+    assert back.uv is None
+    trimesh.Trimesh(np.asarray(mesh.vertices), mesh.faces, process=False).export(tmp_path / "t.off")
+    np.testing.assert_array_equal(jp.load(tmp_path / "t.off").faces, mesh.faces)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jp.save(tmp_path / "plain.off", mesh.with_uv(None))      # no UVs: no warning
+
+
+def test_the_file_is_the_named_format(tmp_path, mesh_uv):
+    mesh, uv = mesh_uv
+    for ext, magic in [(".ply", b"ply\nformat binary_little_endian"), (".glb", b"glTF"),
+                       (".off", b"OFF\n"), (".gltf", b"{"), (".obj", b"# written by jaxparam\nv ")]:
+        jp.save(tmp_path / f"x{ext}", mesh, uv if ext != ".off" else None)
+        assert (tmp_path / f"x{ext}").read_bytes().startswith(magic), ext
+
+
+@pytest.mark.parametrize("ext", [".obj", ".ply"])
+def test_per_corner_uvs_round_trip(tmp_path, mesh_uv, ext):
+    mesh, _ = mesh_uv
+    tex, T = seamed(mesh)
+    p = tmp_path / f"s{ext}"
+    jp.save(p, mesh, tex, uv_faces=T)
+    if ext == ".obj":
+        assert "\nf 1/1 " in p.read_text() or "/" in p.read_text()
+    back = jp.load(p)
+    assert back.uv is None and back.texcoords is not None
+    np.testing.assert_array_equal(back.vertices, np.asarray(mesh.vertices))
+    np.testing.assert_array_equal(back.faces, mesh.faces)
+    # Corner by corner the same UV (the table itself may be renumbered by a format).
+    np.testing.assert_array_equal(back.texcoords[back.uv_faces], tex[T])
+    # And saving the loaded mesh again keeps them (mesh.texcoords are written by default).
+    jp.save(tmp_path / f"again{ext}", back)
+    again = jp.load(tmp_path / f"again{ext}")
+    np.testing.assert_array_equal(again.texcoords[again.uv_faces], tex[T])
+
+
+def test_per_corner_uvs_in_gltf_split_vertices_at_seams(tmp_path, mesh_uv):
+    mesh, _ = mesh_uv
+    tex, T = seamed(mesh)
+    jp.save(tmp_path / "s.glb", mesh, tex, uv_faces=T)
+    back = jp.load(tmp_path / "s.glb")
+    assert back.n_vertices == 3 * mesh.n_faces     # every corner is its own UV here
+    source, F2, uv2 = io.split_seams(mesh.faces, tex, T)
+    np.testing.assert_array_equal(back.faces, F2)
+    close(back.vertices, np.asarray(mesh.vertices)[source], ".glb")
+    close(back.uv, uv2, ".glb")
+    # Corner positions and UVs are those of the original corners.
+    close(back.uv[back.faces], tex[T], ".glb")
+
+
+def test_split_seams_keeps_a_seamless_mesh_as_it_is(mesh_uv):
+    mesh, uv = mesh_uv
+    T = mesh.faces
+    source, F2, uv2 = io.split_seams(mesh.faces, uv, T)
+    np.testing.assert_array_equal(source, np.arange(mesh.n_vertices))
+    np.testing.assert_array_equal(F2, mesh.faces)
+    np.testing.assert_array_equal(uv2, uv)
+
+
+def test_obj_per_corner_reader_on_handwritten_file(tmp_path):
+    """A unit square cut along its diagonal in UV: vertex 1 (index 0-based 0) has two vt."""
+    p = tmp_path / "seam.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvt 0.5 0.5\n"
+                 "f 1/1 2/2 3/3\nf 1/5 3/3 4/4\n")
+    m = jp.load(p)
+    assert m.uv is None
+    np.testing.assert_array_equal(m.uv_faces, [[0, 1, 2], [4, 2, 3]])
+    np.testing.assert_array_equal(m.texcoords[4], [0.5, 0.5])
+    p.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                 "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    m = jp.load(p)
+    np.testing.assert_array_equal(m.uv, [[0, 0], [1, 0], [1, 1], [0, 1]])
+    assert m.texcoords is None
+    p.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n"
+                 "f 1/1 2/2 3/3\nf 1 3 4\n")
+    with pytest.warns(UserWarning, match=r"1 of the faces have no vt.*not loaded"):
+        assert jp.load(p).uv is None
+
+
+@pytest.mark.parametrize("names", [("u", "v"), ("s", "t"), ("texture_u", "texture_v")])
+def test_ply_uv_property_names(tmp_path, names):
+    a, b = names
+    p = tmp_path / "n.ply"
+    p.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                 f"property float z\nproperty float {a}\nproperty float {b}\nelement face 1\n"
+                 "property list uchar int vertex_indices\nend_header\n"
+                 "0 0 0 0.25 0.5\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n")
+    m = jp.load(p)
+    np.testing.assert_array_equal(m.uv, [[0.25, 0.5], [1, 0], [0, 1]])
+
+
+def test_ply_big_endian_quads_and_face_texcoords(tmp_path):
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0]], ">f4")
+    head = ("ply\nformat binary_big_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+            "property list uchar float texcoord\nend_header\n").encode()
+    quad = np.array([4], ">u1").tobytes() + np.array([0, 1, 2, 3], ">i4").tobytes() + \
+        np.array([8], ">u1").tobytes() + np.arange(8, dtype=">f4").tobytes()
+    tri = np.array([3], ">u1").tobytes() + np.array([1, 4, 2], ">i4").tobytes() + \
+        np.array([6], ">u1").tobytes() + (10 + np.arange(6)).astype(">f4").tobytes()
+    p = tmp_path / "q.ply"
+    p.write_bytes(head + V.tobytes() + quad + tri)
+    m = jp.load(p)
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 2, 3], [1, 4, 2]])
+    assert m.uv is None     # vertex 2 has UVs (4, 5) and (14, 15): a seam
+    np.testing.assert_array_equal(m.texcoords[m.uv_faces],
+                                  [[[0, 1], [2, 3], [4, 5]], [[0, 1], [4, 5], [6, 7]],
+                                   [[10, 11], [12, 13], [14, 15]]])
+
+
+@pytest.mark.parametrize("name", ["out.stl", "out.xyz", "out", "out.OBJX"])
+def test_unknown_extension_is_refused_before_any_work(tmp_path, name):
+    with pytest.raises(MeshFileError, match=r"cannot write .*jaxparam writes \.obj, \.ply, \.glb, \.gltf, \.off"):
+        io.check_output_format(tmp_path / name)
+    with pytest.raises(MeshFileError, match=r"cannot write"):
+        jp.save(tmp_path / name, "not a mesh")     # the extension is checked before the mesh
+    assert list(tmp_path.iterdir()) == []
+    assert io.check_output_format("A.GLB") == ".glb"
+    (tmp_path / "d.obj").mkdir()
+    with pytest.raises(MeshFileError, match=r"d\.obj: is a folder; give a file path ending in one of \.obj"):
+        io.check_output_format(tmp_path / "d.obj")
+
+
+def test_glb_with_embedded_checker_texture(tmp_path, mesh_uv):
+    mesh, uv = mesh_uv
+    img = io.checker_texture(64, 8)
+    assert img.shape == (64, 64, 3) and img.dtype == np.uint8
+    assert np.array_equal(img[0, 0], img[0, 16]) and not np.array_equal(img[0, 0], img[0, 8])
+    jp.save(tmp_path / "c.glb", mesh, (uv + 1) / 4, texture=img)
+    scene = trimesh.load(tmp_path / "c.glb", process=False)
+    geom = list(scene.geometry.values())[0]
+    tex = np.asarray(geom.visual.material.baseColorTexture.convert("RGB"))
+    np.testing.assert_array_equal(tex, img)
+    close(np.asarray(geom.visual.uv), (uv + 1) / 4, ".glb")
+    with pytest.raises(MeshFileError, match=r"texture image is embedded only in \.glb or \.gltf"):
+        jp.save(tmp_path / "c.obj", mesh, uv, texture=img)
+    with pytest.raises(MeshError, match=r"texture must be an \(H, W, 3\) uint8"):
+        jp.save(tmp_path / "c.glb", mesh, uv, texture=np.zeros((4, 4)))
+
+
+def test_bad_uv_shapes(tmp_path, mesh_uv):
+    mesh, uv = mesh_uv
+    with pytest.raises(MeshError, match=r"uv must have shape .*per-corner UVs: pass"):
+        jp.save(tmp_path / "a.ply", mesh, uv[:5])
+    with pytest.raises(MeshError, match=r"uv_faces index .* outside the uv table of 5 rows"):
+        jp.save(tmp_path / "a.obj", mesh, uv[:5], uv_faces=mesh.faces)
+    with pytest.raises(MeshError, match=r"uv_faces must be"):
+        jp.save(tmp_path / "a.obj", mesh, uv, uv_faces=mesh.faces[:2])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_trimesh_with_per_corner_uvs_is_a_pytree(mesh_uv):
+    import jax
+    import jax.numpy as jnp
+
+    mesh, _ = mesh_uv
+    tex, T = seamed(mesh)
+    m = jp.TriMesh(mesh.vertices, mesh.faces, texcoords=tex, uv_faces=T)
+    f = jax.jit(lambda mm: jnp.sum(mm.texcoords[mm.uv_faces]) + jnp.sum(mm.vertices))
+    assert np.isclose(f(m), tex[T].sum() + np.sum(mesh.vertices))
+    leaves, tree = jax.tree_util.tree_flatten(m)
+    back = jax.tree_util.tree_unflatten(tree, leaves)
+    np.testing.assert_array_equal(back.uv_faces, T)
+    assert m.with_vertices(np.asarray(mesh.vertices) * 2).uv_faces is m.uv_faces
+    with pytest.raises(MeshError, match=r"need both texcoords"):
+        jp.TriMesh(mesh.vertices, mesh.faces, uv_faces=T)
+    with pytest.raises(MeshError, match=r"uv_faces rows 0, 1, .*\(96 in all\) point outside texcoords \(row 0 = \(0, 1, 2\), 2 texcoords\)"):
+        jp.TriMesh(mesh.vertices, mesh.faces, texcoords=tex[:2], uv_faces=T)
+
+
+@pytest.mark.parametrize("name", ["camelhead.off", "lilium.obj"])
+def test_real_mesh_every_format(tmp_path, name):
+    from conftest import data_path
+
+    src = data_path("meshes", name)
+    mesh = jp.load(src)
+    uv = np.asarray(mesh.vertices)[:, :2]
+    for ext in [".obj", ".ply", ".glb"]:
+        jp.save(tmp_path / f"r{ext}", mesh, uv)
+        t = trimesh.load(tmp_path / f"r{ext}", process=False, force="mesh")
+        assert t.vertices.shape == (mesh.n_vertices, 3) and np.array_equal(t.faces, mesh.faces), ext
+        close(np.asarray(t.visual.uv), uv, ext)
+
+
+@pytest.mark.parametrize("ext", [".ply", ".glb"])
+def test_cli_flatten_writes_the_named_format(tmp_path, ext):
+    """The issue's "done when": ``jaxparam flatten X -o x.ply`` writes a PLY trimesh reads with
+    its UVs (and the same for GLB)."""
+    from jaxparam.cli import main
+
+    mesh = jp.shapes.disk(3, seed=2, height=0.2)
+    src = tmp_path / "in.obj"
+    jp.save(src, mesh)
+    out = tmp_path / f"x{ext}"
+    assert main(["flatten", str(src), "-o", str(out)]) == 0
+    t = trimesh.load(out, process=False, force="mesh")
+    np.testing.assert_array_equal(t.faces, mesh.faces)
+    back = jp.load(out)
+    assert back.uv is not None
+    close(np.asarray(t.visual.uv), back.uv, ext)
+    assert jp.distortion(back, back.uv).flips == 0
+
+
+@pytest.mark.parametrize("ext", [".obj", ".ply", ".glb"])
+def test_per_corner_uvs_read_by_trimesh(tmp_path, mesh_uv, ext):
+    """trimesh holds one UV per vertex, so it splits our seamed files' vertices; corner by
+    corner it reads the same positions and UVs."""
+    mesh, _ = mesh_uv
+    tex, T = seamed(mesh)
+    p = tmp_path / f"s{ext}"
+    jp.save(p, mesh, tex, uv_faces=T)
+    t = trimesh.load(p, process=False, force="mesh")
+    assert len(t.faces) == mesh.n_faces
+    close(np.asarray(t.vertices)[t.faces], np.asarray(mesh.vertices)[mesh.faces], ext)
+    close(np.asarray(t.visual.uv)[t.faces], tex[T], ext)
