@@ -3,13 +3,15 @@
 #   make test   -> .venv, install with test extras, run the test suite (slow tests and notebooks included)
 # and, once set up:
 #   make test-fast -> the suite without the tests marked slow (-m "not slow"; no notebooks)
-#   make notebooks -> execute every notebook in notebooks/ and check what it claims
+#   make notebooks -> execute every notebook in notebooks/ in place (figures kept, progress
+#                     output stripped), then check what each one claims
+#   make docs      -> build the documentation site into site/ (mkdocs --strict)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 
-.PHONY: demo test test-fast notebooks venv clean bench
+.PHONY: demo test test-fast notebooks docs venv clean bench
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,10 +31,16 @@ test-fast: venv
 	$(PY) -m pytest -q -p no:cacheprovider -m "not slow" tests
 
 notebooks: venv
+	$(PIP) install --quiet -e ".[notebooks]"
+	$(PY) notebooks/execute.py
 	$(PY) -m pytest -q -p no:cacheprovider tests/test_notebooks.py
+
+docs: venv
+	$(PIP) install --quiet -e ".[docs]"
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
 
 bench: venv
 	$(PY) benchmarks/linear.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out site .pytest_cache

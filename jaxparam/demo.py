@@ -18,7 +18,14 @@ import numpy as np
 
 import jaxparam as jp
 from jaxparam.cli.pipeline import report_dict, write_json
-from jaxparam.plot import plot_checkerboard, plot_uv
+from jaxparam.plot import plot_checkerboard, plot_remesh, plot_uv
+
+
+def picture(draw, *args) -> None:
+    """Draw and save one picture (``draw(*args)``), then close its figure."""
+    import matplotlib.pyplot as plt
+
+    plt.close(draw(*args))
 
 
 def main(argv=None) -> int:
@@ -40,20 +47,20 @@ def main(argv=None) -> int:
             jp.save(out / f"{stem}.obj", mesh, uv)
             write_json(out / f"{stem}.json", rep)
             if w == "shape_preserving":
-                plot_uv(mesh, uv, out / f"{stem}_uv.png")
-                plot_checkerboard(mesh, uv, out / f"{stem}_checker.png")
+                picture(plot_uv, mesh, uv, out / f"{stem}_uv.png")
+                picture(plot_checkerboard, mesh, uv, out / f"{stem}_checker.png")
             summary.append((stem, rep["flips"], rep["max_aspect"], rep["sym_dirichlet"], sec))
         if hasattr(jp, "minimize"):
             t = time.perf_counter()
-            res = jp.minimize(mesh, "symmetric_dirichlet", free_boundary=True, verbose=False)
+            res = jp.minimize(mesh, "symmetric_dirichlet", free_boundary=True)
             sec = time.perf_counter() - t
             rep = report_dict(mesh, res.uv, seconds={"minimize": sec},
                               extra={"energy": res.energy, "iterations": res.iterations})
             stem = f"{name}_symmetric_dirichlet_free"
             jp.save(out / f"{stem}.obj", mesh, res.uv)
             write_json(out / f"{stem}.json", rep)
-            plot_uv(mesh, res.uv, out / f"{stem}_uv.png")
-            plot_checkerboard(mesh, res.uv, out / f"{stem}_checker.png")
+            picture(plot_uv, mesh, res.uv, out / f"{stem}_uv.png")
+            picture(plot_checkerboard, mesh, res.uv, out / f"{stem}_checker.png")
             summary.append((stem, rep["flips"], rep["max_aspect"], rep["sym_dirichlet"], sec))
     # Survey §7: remesh the graph surface with subdivision connectivity, compress it.
     mesh = meshes["graph_surface"]
@@ -61,7 +68,7 @@ def main(argv=None) -> int:
     semi = jp.remesh(mesh, jp.convex_map(mesh, boundary="circle"), levels=5)
     sec = time.perf_counter() - t
     jp.save(out / "graph_surface_remesh.obj", semi.mesh, semi.uv)
-    jp.plot.plot_remesh(semi, out / "graph_surface_remesh.png")
+    picture(plot_remesh, semi, out / "graph_surface_remesh.png")
     small = jp.wavelets.compress(semi, 0.02)
     jp.save(out / "graph_surface_remesh_2pc.obj", small.mesh, semi.uv)
     rep = report_dict(semi.mesh, semi.uv, seconds={"remesh": sec})
@@ -73,7 +80,7 @@ def main(argv=None) -> int:
     closed = param.remesh(3)
     sec = time.perf_counter() - t
     jp.save(out / "torus_remesh.obj", closed.mesh)
-    jp.plot.plot_remesh(closed, out / "torus_remesh.png")
+    picture(plot_remesh, closed, out / "torus_remesh.png")
     print(f"torus (genus 1): base domain {base.n_faces} faces, remesh {closed.mesh.n_faces} faces, "
           f"genus {closed.mesh.topology.genus}, {sec:.2f} s")
     print(f"{'result':48s} {'flips':>5s} {'max σ1/σ2':>10s} {'sym.Dir.':>9s} {'seconds':>8s}")

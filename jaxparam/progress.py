@@ -16,7 +16,7 @@ from functools import lru_cache
 
 from .settings import config
 
-__all__ = ["progress", "enabled"]
+__all__ = ["progress", "enabled", "write"]
 
 
 def enabled(verbose: bool | None = None) -> bool:
@@ -56,3 +56,11 @@ def progress(iterable=None, *, total=None, desc: str, unit: str = "it", verbose:
     """
     return _bar_class()(iterable, total=total, desc=desc, unit=unit, disable=not enabled(verbose),
                         delay=delay, leave=leave, file=sys.stderr)
+
+
+def write(message: str) -> None:
+    """Print ``message`` as one line on stderr without breaking a running text bar (tqdm
+    clears the bar, prints, and redraws it)."""
+    from tqdm import tqdm as text_bar
+
+    text_bar.write(message, file=sys.stderr)

@@ -169,3 +169,111 @@ def test_python_m_jaxparam_cli_and_the_pipeline_are_importable():
     assert code == 4 and message == "solver failed at stage 'factorize': singular"
     assert pipeline.failure(jp.MeshFileError("x: no such file."))[0] == 3
     assert pipeline.failure(KeyError("k"))[0] == 1
+
+
+# --- issue 16: help with examples and defaults, --version, --quiet, output format first,
+# the unconverged warning, a GLB with its checker texture ---------------------------------
+
+SUBCOMMANDS = ["info", "flatten", "meshless", "fit", "remesh", "compress", "manifold",
+               "batch"]
+
+
+@pytest.mark.parametrize("command", SUBCOMMANDS)
+def test_every_subcommand_help_has_an_example_and_defaults(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "example:" in out and f"jaxparam {command} " in out.split("example:")[1]
+    assert "--quiet" in out
+    if command not in ("info",):
+        assert "(default: " in out
+
+
+def test_version_is_the_packages(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"jaxparam {jp.__version__}"
+
+
+def test_unknown_output_extension_fails_before_any_work(tmp_path, capsys):
+    # The input does not exist: an error about the extension proves nothing was loaded.
+    code = main(["flatten", str(tmp_path / "missing.obj"), "-o", str(tmp_path / "x.stl")])
+    assert code == 3
+    err = capsys.readouterr().err
+    assert ".stl" in err and "missing.obj" not in err
+    assert not any(tmp_path.iterdir())
+
+
+def test_quiet_switches_the_library_bars_off(mesh_file, tmp_path):
+    before = jp.config.progress
+    try:
+        jp.config.progress = True
+        assert main(["flatten", str(mesh_file), "-o", str(tmp_path / "o.obj"), "--quiet"]) == 0
+        assert jp.config.progress is False
+        jp.config.progress = True
+        assert main(["-q", "info", str(mesh_file)]) == 0
+        assert jp.config.progress is False
+    finally:
+        jp.config.progress = before
+
+
+def test_unconverged_minimization_warns_on_stderr(mesh_file, tmp_path, capsys):
+    rep = tmp_path / "r.json"
+    code = main(["flatten", str(mesh_file), "-o", str(tmp_path / "o.obj"), "--energy",
+                 "symmetric-dirichlet", "--free-boundary", "--max-iters", "1", "--report", str(rep)])
+    assert code == 0
+    assert json.loads(rep.read_text())["converged"] is False
+    err = capsys.readouterr().err
+    assert "warning" in err and "without converging" in err and "--max-iters" in err
+    # a converged run says nothing of the sort
+    code = main(["flatten", str(mesh_file), "-o", str(tmp_path / "o2.obj"), "--energy",
+                 "symmetric-dirichlet", "--max-iters", "200"])
+    assert code == 0 and "without converging" not in capsys.readouterr().err
+
+
+def test_glb_with_checker_texture_opens_in_trimesh(mesh_file, tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    out = tmp_path / "flat.glb"
+    assert main(["flatten", str(mesh_file), "-o", str(out), "--checker-texture"]) == 0
+    scene = trimesh.load(out, process=False)
+    geom = list(scene.geometry.values())[0] if hasattr(scene, "geometry") else scene
+    assert geom.visual.uv is not None and len(geom.visual.uv) == geom.vertices.shape[0]
+    image = geom.visual.material.baseColorTexture
+    assert image is not None and min(image.size) >= 64
+
+
+@pytest.mark.slow
+def test_batch_on_a_local_ray(tmp_path):
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'jaxparam[ray]')")
+    folder = tmp_path / "in"
+    folder.mkdir()
+    jp.save(folder / "a.obj", jp.shapes.graph_surface(6))
+    jp.save(folder / "b.obj", jp.shapes.disk(3))
+    ray.init(num_cpus=2, include_dashboard=False, ignore_reinit_error=True,
+             log_to_driver=False)
+    try:
+        out = tmp_path / "out"
+        assert main(["batch", str(folder), "-o", str(out), "--engine", "ray", "--quiet"]) == 0
+    finally:
+        ray.shutdown()
+    recs = [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
+    assert [r["status"] for r in recs] == ["ok", "ok"]
+    for r in recs:
+        m = jp.load(r["output"])
+        assert m.uv is not None and jp.distortion(m, m.uv).flips == 0
+
+
+@pytest.mark.parametrize("ext", [".ply", ".glb", ".obj"])
+def test_flatten_writes_the_format_the_extension_names(mesh_file, tmp_path, ext):
+    """`jaxparam flatten X -o x.ply` writes a PLY that trimesh reads with its UVs (and so on)."""
+    trimesh = pytest.importorskip("trimesh")
+    out = tmp_path / f"flat{ext}"
+    assert main(["flatten", str(mesh_file), "-o", str(out), "--quiet"]) == 0
+    t = trimesh.load(out, process=False, force="mesh")
+    src = jp.load(mesh_file)
+    assert t.vertices.shape == np.asarray(src.vertices).shape
+    mine = jp.load(out)
+    assert t.visual.uv is not None
+    np.testing.assert_allclose(np.asarray(t.visual.uv), np.asarray(mine.uv), atol=1e-6)

@@ -36,8 +36,9 @@ def test_better_parameterization_gives_better_spline():
 
 def test_isocurve_picture(tmp_path, mesh_uv):
     mesh, uv = mesh_uv
-    p = jp.plot.plot_isocurves(jp.fit_surface(mesh, uv), tmp_path / "iso.png")
-    assert p.stat().st_size > 5000
+    p = tmp_path / "iso.png"
+    fig = jp.plot.plot_isocurves(jp.fit_surface(mesh, uv), p)
+    assert fig.axes and p.stat().st_size > 5000
 
 
 def test_fit_errors(mesh_uv):

@@ -2,8 +2,8 @@
 stays true, then check what each one claims.
 
 The cells are executed with ``exec`` in one namespace per notebook, in a fresh working folder
-(the plots go to ``out/`` there; ``jaxparam.plot`` forces matplotlib's Agg backend, so nothing
-needs a display).  nbclient/nbconvert are not needed.  Each notebook runs under a time limit
+(the plots go to ``out/`` there; matplotlib picks a backend that needs no display, Agg, where
+there is none).  nbclient/nbconvert are not needed.  Each notebook runs under a time limit
 (``TIMEOUT_S``), and the tests are marked ``slow``: ``make test-fast`` leaves them out,
 ``make test`` and ``make notebooks`` run them.
 """
@@ -89,6 +89,17 @@ def check_01(ns, out):
     # jax.grad through the sparse solve: the notebook's gradient against a finite difference.
     assert ns["g"].shape == ns["mesh"].vertices.shape
     assert_gradient_matches_fd(ns["g"], ns["loss"], ns["mesh"].vertices, h=1e-6, rtol=1e-5)
+    # Fig. 4: the spline approximates the real mesh closely over the square map.
+    diag = np.linalg.norm(np.ptp(np.asarray(ns["bump"].vertices), 0))
+    assert ns["spline"].residual_rms < 0.01 * diag
+    # Figs. 6 and 8: shape-preserving weights distort less than uniform ones; both one-to-one.
+    f68 = ns["fit68"]
+    assert f68["shape_preserving"].mips < f68["uniform"].mips
+    assert f68["uniform"].flips == f68["shape_preserving"].flips == 0
+    # Fig. 12: the best-fit plane boundary beats the circle and the rectangle.
+    f12 = ns["fit12"]
+    assert f12["plane"].mips < min(f12["circle"].mips, f12["square"].mips)
+    assert f12["plane"].flips == 0 and f12["circle"].flips == 0
 
 
 def check_02(ns, out):
@@ -101,6 +112,9 @@ def check_02(ns, out):
     V0 = ns["small"].vertices
     g = jax.grad(ns["loss"])(jnp.asarray(V0))
     assert_gradient_matches_fd(g, ns["loss"], V0, h=1e-5, rtol=1e-5)
+    # Fig. 16: the most isometric map converges, flips nothing and lowers MIPS.
+    assert ns["most"].converged and ns["after"].flips == 0
+    assert ns["after"].mips < ns["before"].mips
 
 
 def check_03(ns, out):
@@ -125,6 +139,23 @@ def check_04(ns, out):
 def check_05(ns, out):
     assert_png(out, "nb05_torus_remesh.png")
     assert ns["err"] < 1e-12 and ns["semi"].mesh.topology.genus == 1
+
+
+def check_06(ns, out):
+    assert_png(out, "nb06_weights.png")
+    assert_png(out, "nb06_shape.png")
+    # Learned spring weights: MIPS falls from Tutte's by more than 4 % (measured 2.386 ->
+    # 2.278) and ends below the mean-value map's (2.299); the weights stay positive.
+    lw = ns["losses_w"]
+    assert lw[-1] < 0.96 * lw[0] and lw[-1] < ns["mips_mean_value"], (lw[0], lw[-1])
+    assert np.all(ns["mu"] > 0)
+    jp, mesh = ns["jp"], ns["mesh"]
+    assert jp.metrics.flips(mesh, ns["uv_after"]) == 0
+    # Through minimize: the loss falls, and the minimized energy's excess over an isometry
+    # falls by more than half (measured 2.6e-2 -> 3e-3).
+    lv = ns["losses_v"]
+    assert lv[-1] < lv[0] and all(b <= a + 1e-12 for a, b in zip(lv, lv[1:])), lv
+    assert 0 < ns["excess_after"] < 0.5 * ns["excess_before"], (ns["excess_before"], ns["excess_after"])
 
 
 CHECKS = {
@@ -154,4 +185,66 @@ def test_the_time_limit_stops_a_notebook(tmp_path):
 def test_notebook_runs(path, tmp_path):
     (tmp_path / "out").mkdir()
     ns = run_notebook(path, tmp_path)
-    CHECKS[path.stem](ns, tmp_path / "out")
+    try:
+        CHECKS[path.stem](ns, tmp_path / "out")
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close("all")
+
+
+# --- the stored notebooks (make notebooks: notebooks/execute.py) ----------------------------
+
+#: Notebooks stored executed, and how many figures each shows at least.  `make notebooks`
+#: executes all of them; add a notebook here once it is stored executed.
+STORED = {"01_convex_combination_maps": 12, "02_nonlinear_methods": 2}
+
+#: The largest stored notebook, in bytes: small enough to review.
+MAX_BYTES = 3_000_000
+
+
+def outputs_of(path: Path) -> list[dict]:
+    cells = json.loads(path.read_text())["cells"]
+    return [o for c in cells if c["cell_type"] == "code" for o in c.get("outputs", [])]
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_stored_outputs_hold_no_progress_or_stderr(path):
+    """Whatever a notebook stores is clean: no stderr, no progress bars, no widgets."""
+    for o in outputs_of(path):
+        assert not (o["output_type"] == "stream" and o.get("name") == "stderr"), (path.name, o)
+        assert "\r" not in "".join(o.get("text", "")), (path.name, "a text progress bar")
+        assert "application/vnd.jupyter.widget-view+json" not in o.get("data", {}), path.name
+    assert path.stat().st_size < MAX_BYTES
+
+
+@pytest.mark.parametrize("stem", sorted(STORED))
+def test_stored_notebooks_are_executed_with_their_figures(stem):
+    path = NB / f"{stem}.ipynb"
+    cells = [c for c in json.loads(path.read_text())["cells"] if c["cell_type"] == "code"]
+    assert all(c.get("execution_count") for c in cells), f"{path.name}: run make notebooks"
+    pngs = sum("image/png" in o.get("data", {}) for o in outputs_of(path))
+    assert pngs >= STORED[stem], (path.name, pngs)
+
+
+def test_strip_drops_progress_and_stderr_only():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("nb_execute", NB / "execute.py")
+    execute = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(execute)
+    nbformat = pytest.importorskip("nbformat", reason="the notebooks extra is not installed")
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("x", outputs=[
+        nbformat.v4.new_output("stream", name="stderr", text="warning\n"),
+        nbformat.v4.new_output("stream", name="stdout", text="  5%|5/100\r 10%|10/100\r"),
+        nbformat.v4.new_output("display_data", data={
+            "application/vnd.jupyter.widget-view+json": {"model_id": "x"}, "text/plain": "bar"}),
+        nbformat.v4.new_output("stream", name="stdout", text="result 42\n"),
+        nbformat.v4.new_output("display_data", data={"image/png": "iVBORw0KGgo=",
+                                                     "text/plain": "<Figure>"}),
+    ])])
+    nb.cells[0].metadata["execution"] = {"iopub.status.busy": "2026-12-01"}
+    assert execute.strip(nb) == 3
+    kept = nb.cells[0].outputs
+    assert [o.get("text", "") for o in kept][0] == "result 42\n" and "image/png" in kept[1]["data"]
+    assert "execution" not in nb.cells[0].metadata

@@ -7,6 +7,11 @@ either spelling on the command line (``shape-preserving`` or
 ``shape_preserving``); defaults are those of the library functions the
 options mirror.
 
+Every subcommand takes ``--quiet`` (no progress bars: ``jp.config.progress = False``;
+``JAXPARAM_PROGRESS=0`` and ``TQDM_DISABLE=1`` do the same); ``-o`` is checked
+(:func:`jaxparam.io.check_output_format`) before any work.  ``jaxparam --version`` prints
+the version.
+
 Modules: :mod:`.pipeline` (the flatten pipeline, reports, exit codes: library
 code), :mod:`.arguments` (named options and API defaults), :mod:`.commands`
 (the subcommand handlers), :mod:`.batch` (``jaxparam batch``).
@@ -17,30 +22,32 @@ import argparse
 import sys
 
 from ..errors import JaxparamError
+from ..io import check_output_format
 from ..fitting import KINDS as FIT_KINDS
 from ..fitting import Surface, fit_surface
 from ..linear import convex_map
 from ..manifold import ManifoldParameterization, manifold_map
 from ..options import default_of
+from ..settings import config
 from ..points import WEIGHTS as POINT_WEIGHTS
 from ..points import reconstruct_surface
 from ..remesh import remesh
 from ..wavelets import WAVELETS, compress
 from ..weights import KINDS as WEIGHT_KINDS
 from . import batch, commands
-from .arguments import add_flatten_options, add_mirrored, add_named
+from .arguments import HelpFormatter, add_flatten_options, add_mirrored, add_named, subparser, version
 from .pipeline import EXIT_INTERRUPTED, failure, flatten_mesh, report_dict, write_json
 
 __all__ = ["main", "build_parser", "flatten_mesh", "report_dict", "write_json"]
-
 
 def _command(sub, name: str, help: str, func, input_name: str = "mesh", *, report: bool = True,
              plot: bool = True) -> argparse.ArgumentParser:
     """Add subcommand ``name`` run by ``func(args)``, with its input, ``-o/--output`` and, when
     asked, ``--report`` and ``--plot``; returns its parser for the further options."""
-    p = sub.add_parser(name, help=help)
-    p.add_argument(input_name)
-    p.add_argument("-o", "--output", required=True)
+    p = subparser(sub, name, help)
+    p.add_argument(input_name, help=f"the input {'point set (.xyz, .txt, .ply, .npy)' if input_name == 'points' else 'mesh (.obj, .off, .ply, .stl, .glb, ...)'}")
+    p.add_argument("-o", "--output", required=True,
+                   help="the output mesh: .obj, .ply, .glb, .gltf or .off (UVs dropped)")
     if report:
         p.add_argument("--report", help="write the report (JSON) here")
     if plot:
@@ -51,12 +58,16 @@ def _command(sub, name: str, help: str, func, input_name: str = "mesh", *, repor
 
 def _add_commands(sub) -> None:
     """Every subcommand but ``batch``."""
-    p = sub.add_parser("info", help="topology facts of a mesh")
-    p.add_argument("mesh")
-    p.add_argument("--json", action="store_true")
+    p = subparser(sub, "info", "topology facts of a mesh")
+    p.add_argument("mesh", help="the input mesh")
+    p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=commands.cmd_info)
 
-    add_flatten_options(_command(sub, "flatten", "parameterize a disk mesh", commands.cmd_flatten))
+    p = _command(sub, "flatten", "parameterize a disk mesh", commands.cmd_flatten)
+    add_flatten_options(p)
+    p.add_argument("--checker-texture", action="store_true",
+                   help="embed a checkerboard texture in a .glb/.gltf output, so any glTF "
+                        "viewer shows the map")
 
     p = _command(sub, "meshless", "parameterize and triangulate unorganized points",
                  commands.cmd_meshless, "points")
@@ -88,10 +99,18 @@ def _add_commands(sub) -> None:
     add_mirrored(p, "--levels", ManifoldParameterization.remesh, "levels", "subdivision levels")
 
 
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``jaxparam`` argument parser: one subparser per command, ``func`` its handler."""
-    ap = argparse.ArgumentParser(prog="jaxparam", description=__doc__.split("\n")[0])
-    sub = ap.add_subparsers(dest="command", required=True)
+    ap = argparse.ArgumentParser(prog="jaxparam", description="Differentiable parameterization "
+                                 "of triangle meshes and point sets (Floater & Hormann).",
+                                 epilog="'jaxparam COMMAND --help' shows each command's options, "
+                                        "defaults and an example.",
+                                 formatter_class=HelpFormatter)
+    ap.add_argument("--version", action="version", version=f"jaxparam {version()}")
+    ap.add_argument("-q", "--quiet", action="store_true",
+                    help="no progress bars (also JAXPARAM_PROGRESS=0 or TQDM_DISABLE=1)")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_commands(sub)
     batch.add_parser(sub)
     return ap
@@ -104,7 +123,11 @@ def main(argv=None) -> int:
     ``jaxparam <command>: <message>`` and give 3 or 4 (:func:`~.pipeline.failure`).
     """
     args = build_parser().parse_args(argv)
+    if args.quiet:
+        config.progress = False
     try:
+        if getattr(args, "output", None) and args.command != "batch":
+            check_output_format(args.output)        # an unknown extension fails before work
         return args.func(args)
     except JaxparamError as exc:
         code, message = failure(exc)

@@ -9,6 +9,8 @@ command-line spelling, which reports print, and handlers call the library with
 from __future__ import annotations
 
 import argparse
+import sys
+from importlib import metadata
 from typing import Any, Callable, Iterable
 
 from .. import boundary as bmap
@@ -20,7 +22,56 @@ from ..options import choose, default_of, hyphenated
 
 from .pipeline import FLATTEN_OPTIONS
 
-__all__ = ["Named", "add_named", "add_mirrored", "add_flatten_options", "flatten_options"]
+__all__ = ["Named", "add_named", "add_mirrored", "add_flatten_options", "flatten_options",
+           "EXAMPLES", "HelpFormatter", "version", "subparser"]
+
+#: One example a subcommand, shown at the end of its ``--help``.
+EXAMPLES = {
+    "info": "jaxparam info camelhead.off --json",
+    "flatten": "jaxparam flatten camelhead.off -o flat.ply --weights mean-value --boundary circle\n"
+               "  jaxparam flatten camelhead.off -o flat.glb --energy symmetric-dirichlet "
+               "--free-boundary --checker-texture --report r.json --plot uv.png",
+    "meshless": "jaxparam meshless points.xyz -o surface.obj --k 10 --plot uv.png",
+    "fit": "jaxparam fit flat.obj -o spline.obj --surface spline --resolution 64",
+    "remesh": "jaxparam remesh camelhead.off -o semi.obj --levels 4 --base-faces 6 "
+              "--plot remesh.png",
+    "compress": "jaxparam compress semi.obj -o small.obj --keep 0.02 --wavelet lifted",
+    "manifold": "jaxparam manifold bunny.off -o bunny_semi.obj --base-faces 100 --levels 3",
+    "batch": "jaxparam batch meshes/ -o flat/ --weights mean-value --workers 2\n"
+             "  jaxparam batch meshes/ -o flat/ --engine ray      (pip install 'jaxparam[ray]')",
+}
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help that keeps the examples' line breaks and shows every option's default (options
+    without one, and flags, show none)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if ("%(default)" not in text and action.option_strings and not action.required
+                and action.default not in (None, False, argparse.SUPPRESS)
+                and action.nargs != 0):
+            text += " (default: %(default)s)"
+        return text
+
+
+def version() -> str:
+    """The installed version of jaxparam (the package's own when it is not installed)."""
+    try:
+        return metadata.version("jaxparam")
+    except metadata.PackageNotFoundError:
+        return getattr(sys.modules.get("jaxparam"), "__version__", "unknown")
+
+
+def subparser(sub, name: str, help: str, **kwargs) -> argparse.ArgumentParser:
+    """``sub.add_parser(name)`` with its example as epilog and ``--quiet``."""
+    p = sub.add_parser(name, help=help, description=kwargs.pop("description", help[:1].upper()
+                                                                     + help[1:] + "."),
+                       epilog="example:\n  " + EXAMPLES[name] if name in EXAMPLES else None,
+                       formatter_class=HelpFormatter, **kwargs)
+    p.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                   help="no progress bars (also JAXPARAM_PROGRESS=0 or TQDM_DISABLE=1)")
+    return p
 
 
 class Named:
@@ -75,7 +126,8 @@ def add_flatten_options(p: argparse.ArgumentParser) -> None:
     add_named(p, "--spacing", bmap.SPACINGS, default_of(convex_map, "spacing"))
     add_named(p, "--energy", sorted(ENERGIES), None,
               "minimize this energy after the convex map (e.g. symmetric-dirichlet, mips)")
-    p.add_argument("--free-boundary", action="store_true")
+    p.add_argument("--free-boundary", action="store_true",
+                   help="let the boundary move while minimizing (needs --energy)")
     add_named(p, "--solver", SOLVERS, default_of(minimize, "solver"))
     add_mirrored(p, "--max-iters", minimize, "max_iters", "iterations at most")
 

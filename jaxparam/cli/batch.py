@@ -50,7 +50,8 @@ from typing import Callable
 
 from ..errors import MeshFileError
 from ..io import atomic_write, load, save
-from .arguments import add_flatten_options, flatten_options
+from ..progress import progress, write
+from .arguments import add_flatten_options, flatten_options, subparser
 from .pipeline import (EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_SOLVER, EXIT_USAGE, clean,
                        enable_compile_cache, failure, flatten_mesh)
 
@@ -109,7 +110,7 @@ def flatten_file(path, out_path, options: dict) -> dict:
     try:
         mesh = load(path)
         notes: list = []
-        uv, rep = flatten_mesh(mesh, **options, say=notes.append)
+        uv, rep = flatten_mesh(mesh, **options, say=notes.append, verbose=False)  # the batch bar only
         save(out_path, mesh, uv)
         rep = dict(rep)
         rec["stage_seconds"] = rep.pop("seconds", {})
@@ -194,20 +195,27 @@ def run_batch(files, outputs, options: dict, *, workers: int = 1, engine: str = 
     records: list = [None] * len(jobs)
     done = [0]
 
+    bar = progress(total=len(jobs), desc="batch", unit="file")
+
     def report(i, rec):
         records[i] = rec
         done[0] += 1
+        bar.update(1)
         state = "ok" if rec["status"] == "ok" else f"error: {rec['error']}"
+        if rec["status"] == "ok" and rec.get("converged") is False:
+            state += (f" (warning: the minimization stopped after {rec.get('iterations')} "
+                      "iterations without converging)")
         say(f"[{done[0]}/{len(jobs)}] {Path(rec['file']).name}: {state}")
 
-    if engine == "ray":
-        _run_ray(jobs, report, work)
-    elif workers <= 1:
-        enable_compile_cache()
-        for i, args in jobs:
-            report(i, work(*args))
-    else:
-        _run_pool(jobs, workers, report, work)
+    with bar:
+        if engine == "ray":
+            _run_ray(jobs, report, work)
+        elif workers <= 1:
+            enable_compile_cache()
+            for i, args in jobs:
+                report(i, work(*args))
+        else:
+            _run_pool(jobs, workers, report, work)
     return records
 
 
@@ -253,10 +261,16 @@ def cmd_batch(args) -> int:
         raise MeshFileError(f"batch: {args.output} is a file, not a folder; give a folder to -o.")
     outputs = output_paths(files, out)
     t = time.perf_counter()
+    quiet = getattr(args, "quiet", False)
     records = run_batch(files, outputs, flatten_options(args), workers=args.workers,
-                        engine=args.engine, say=lambda m: print(m, file=sys.stderr))
+                        engine=args.engine,
+                        say=(lambda m: None if "warning" not in m else write(m)) if quiet else write)
     atomic_write(out / SUMMARY, lambda f: f.writelines(json.dumps(r) + "\n" for r in records))
     ok = sum(r["status"] == "ok" for r in records)
+    unconverged = sum(r["status"] == "ok" and r.get("converged") is False for r in records)
+    if unconverged:
+        err(f"warning: {unconverged} minimization(s) stopped without converging; their records "
+            "say \"converged\": false (raise --max-iters or try another --solver)")
     print(f"{out / SUMMARY}: {ok} of {len(records)} files flattened "
           f"({time.perf_counter() - t:.1f} s)")
     return exit_code(records)
@@ -264,7 +278,7 @@ def cmd_batch(args) -> int:
 
 def add_parser(sub) -> None:
     """Add ``batch`` to the CLI's subparsers ``sub``, with the flatten options."""
-    p = sub.add_parser("batch", help="flatten every mesh file of a folder",
+    p = subparser(sub, "batch", "flatten every mesh file of a folder",
                        description="Flatten every .obj/.off/.ply/.stl file of FOLDER into "
                                    "OUTFOLDER/<stem>.obj; one bad file never stops the rest, "
                                    "OUTFOLDER/summary.jsonl says which and why. Exit 0 all ok, "
@@ -273,6 +287,9 @@ def add_parser(sub) -> None:
     p.add_argument("-o", "--output", required=True, help="the output folder (created if needed)")
     add_flatten_options(p)
     p.add_argument("--workers", type=_positive_int, default=1,
-                   help="processes working in parallel (default 1: this process)")
-    p.add_argument("--engine", choices=["local", "ray"], default="local")
+                   help="processes working in parallel (1: this process)")
+    p.add_argument("--engine", choices=["local", "ray"], default="local",
+                   help="local: this machine (--workers processes); ray: one Ray task per "
+                        "file on the cluster ray.init() finds, or a local one "
+                        "(pip install 'jaxparam[ray]')")
     p.set_defaults(func=cmd_batch)

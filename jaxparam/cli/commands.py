@@ -21,7 +21,7 @@ from ..options import canonical
 from .arguments import flatten_options
 from .pipeline import EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
 
-__all__ = ["begin", "finish", "drawing", "cmd_info", "cmd_flatten", "cmd_meshless", "cmd_fit",
+__all__ = ["begin", "finish", "drawing", "warn_unconverged", "cmd_info", "cmd_flatten", "cmd_meshless", "cmd_fit",
            "cmd_remesh", "cmd_compress", "cmd_manifold"]
 
 
@@ -38,25 +38,41 @@ def begin(path, *, reader: Callable = load, compile_cache: bool = True):
 
 
 def drawing(name: str, *data) -> Callable[[str], None]:
-    """``plot(path)`` that draws ``jaxparam.plot.<name>(*data, path)``; matplotlib is imported
-    only when a picture is asked for."""
+    """``plot(path)`` that draws ``jaxparam.plot.<name>(*data, path)`` and closes the figure;
+    matplotlib is imported only when a picture is asked for."""
     def draw(path) -> None:
+        import matplotlib.pyplot as plt
+
         from .. import plot
 
-        getattr(plot, name)(*data, path)
+        plt.close(getattr(plot, name)(*data, path))
 
     return draw
 
 
+def warn_unconverged(command: str, rep: dict, name: str = "") -> bool:
+    """Print a warning on stderr when the report ``rep`` says a minimization stopped
+    unconverged (``rep["converged"]`` is False); returns whether it did."""
+    if rep.get("converged", True):
+        return False
+    where = f" on {name}" if name else ""
+    print(f"jaxparam {command}: warning: the minimization{where} stopped after "
+          f"{rep.get('iterations')} iterations without converging (energy "
+          f"{rep.get('energy', float('nan')):.6g}); the result is usable but not optimal: raise "
+          "--max-iters or try another --solver", file=sys.stderr)
+    return True
+
+
 def finish(args, mesh, uv, line: str, *, report: dict | None = None,
-           plot: Callable | None = None, save_stage: str | None = None) -> int:
+           plot: Callable | None = None, save_stage: str | None = None, texture=None) -> int:
     """Write the command's outputs, all or nothing, then print ``line``; returns ``EXIT_OK``.
 
     **Arguments:** ``args`` the parsed command line (``output``, and ``report``/``plot``
     when the command has them); ``mesh`` and ``uv: (n, 2)`` (or None: ``mesh.uv``) saved
     to ``args.output``; ``report`` written to ``--report``; ``plot(path)`` draws
     ``--plot``; ``save_stage`` the key under which the save's seconds go into
-    ``report["seconds"]`` (before the report is written).
+    ``report["seconds"]`` (before the report is written); ``texture`` an image embedded in a
+    ``.glb``/``.gltf`` output (:func:`jaxparam.io.save`'s ``texture=``).
 
     A failure while writing (or Ctrl-C) removes what this run already wrote, then
     re-raises.
@@ -64,7 +80,10 @@ def finish(args, mesh, uv, line: str, *, report: dict | None = None,
     written = []
     try:
         clock = StageClock()
-        save(args.output, mesh, uv)
+        if texture is None:
+            save(args.output, mesh, uv)
+        else:
+            save(args.output, mesh, uv, texture=texture)
         written.append(args.output)
         if save_stage and report is not None:
             report["seconds"][save_stage] = clock(save_stage)
@@ -102,8 +121,18 @@ def cmd_flatten(args) -> int:
     mesh, clock = begin(args.mesh)
     uv, rep = flatten_mesh(mesh, **flatten_options(args), say=lambda m: print(m, file=sys.stderr))
     rep["seconds"]["load"] = clock["load"]
+    warn_unconverged("flatten", rep)
+    texture = None
+    if getattr(args, "checker_texture", False):
+        if Path(args.output).suffix.lower() not in (".glb", ".gltf"):
+            print("jaxparam flatten: note: --checker-texture applies to .glb/.gltf outputs only; "
+                  f"{args.output} is written without a texture", file=sys.stderr)
+        else:
+            from ..io import checker_texture
+
+            texture = checker_texture()
     return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
-                  save_stage="save",
+                  save_stage="save", texture=texture,
                   line=f"{args.output}: {rep['vertices']} vertices, {rep['faces']} faces, "
                        f"{rep['flips']} flipped, max aspect {rep['max_aspect']:.3g}")
 

@@ -129,7 +129,7 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
                  free_boundary: bool = default_of(minimize, "free_boundary"),
                  solver: str = default_of(minimize, "solver"),
                  max_iters: int = default_of(minimize, "max_iters"),
-                 say: Callable[[str], object] = print):
+                 say: Callable[[str], object] = print, verbose: bool | None = None):
     """The flatten pipeline on a loaded disk mesh: a convex map, then, when ``energy`` is
     given, :func:`jaxparam.minimize` from it; then the report.
 
@@ -137,7 +137,8 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
     are filled virtually; ``say`` gets a note); ``weights``, ``boundary``, ``spacing`` as
     for :func:`jaxparam.convex_map`; ``energy``, ``free_boundary``, ``solver``,
     ``max_iters`` as for :func:`jaxparam.minimize`; the defaults are those functions'.
-    Names may be spelled with hyphens or underscores.
+    Names may be spelled with hyphens or underscores.  ``verbose`` the minimization's
+    progress bar (None: ``jp.config.progress``).
 
     **Returns:** ``(uv, report)``: ``uv (n, 2) float64`` numpy, and :func:`report_dict`'s
     dict with ``seconds`` (``convex_map``, ``minimize`` when run, ``report``) and the
@@ -161,7 +162,7 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
     weights_used = canonical(weights)
     if energy:
         res = minimize(mesh, canonical(energy), init=uv, free_boundary=free_boundary,
-                       solver=canonical(solver), max_iters=max_iters, verbose=False)
+                       solver=canonical(solver), max_iters=max_iters, verbose=verbose)
         seconds("minimize")
         uv = np.asarray(res.uv)
         extra.update({"energy": float(res.energy), "iterations": int(res.iterations),

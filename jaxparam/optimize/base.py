@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import tol
 from ..errors import SolverError
+from ..progress import progress
 from .problem import Problem
 
 __all__ = ["StopRules", "SolveResult", "Step", "Solver", "HostLoopSolver", "Monitor",
@@ -118,12 +119,11 @@ def start_point(problem: Problem):
     return x, f, g
 
 
-def progress_bar(problem: Problem, solver: Solver, total: int, verbose: bool):
-    """A tqdm bar that shows only for runs longer than a second (and never when quiet)."""
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=f"{problem.en.name} ({solver.name})", delay=1.0,
-                disable=not verbose, leave=False)
+def progress_bar(problem: Problem, solver: Solver, total: int, verbose: bool | None):
+    """A bar (:func:`jaxparam.progress.progress`) that shows only for runs longer than a
+    second; ``verbose`` None follows ``jp.config.progress``."""
+    return progress(total=total, desc=f"{problem.en.name} ({solver.name})", unit="step",
+                    verbose=verbose)
 
 
 class Monitor:

@@ -76,7 +76,7 @@ def _concrete(a):
 def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bool = False,
              solver: str | Solver = "newton", max_iters: int = 200,
              energy_rtol: float = tol.ENERGY_RTOL, grad_rtol: float = tol.GRAD_RTOL,
-             max_seconds: float | None = None, verbose: bool = True,
+             max_seconds: float | None = None, verbose: bool | None = None,
              strict: bool = False) -> MinimizeResult:
     """Minimize a distortion energy over the UVs without ever inverting a triangle.
 
@@ -95,7 +95,8 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
       settings, e.g. ``jp.optimize.Newton(regularization=1e-9)``.
     - ``max_iters``, ``energy_rtol``, ``grad_rtol``, ``max_seconds``: stopping rules
       (:class:`jaxparam.optimize.StopRules`).
-    - ``verbose``: a progress bar for runs longer than a second.
+    - ``verbose``: a progress bar for runs longer than a second (None: as
+      ``jp.config.progress`` says, on unless ``JAXPARAM_PROGRESS=0`` or ``TQDM_DISABLE=1``).
     - ``strict``: refuse to differentiate a run that did not converge (a
       :class:`SolverError`, stage ``"gradient"``, when the gradient is taken) instead of
       warning :class:`~jaxparam.optimize.UnconvergedGradientWarning`.
