@@ -96,6 +96,12 @@ def _add_commands(sub) -> None:
     p = _command(sub, "manifold", "parameterize a closed mesh of any genus over a base domain "
                  "and remesh it with subdivision connectivity", commands.cmd_manifold)
     add_mirrored(p, "--base-faces", manifold_map, "base_faces", "triangles of the base domain")
+    add_mirrored(p, "--method", manifold_map, "method",
+                 "maps (the map built during decimation, never blocked) or paths (surface edges "
+                 "traced along mesh edges)", type=str)
+    p.add_argument("--fidelity", action="store_true",
+                   help="add the remesh's Hausdorff and RMS distances to the input (both ways, "
+                        "relative to the diagonal) and its worst area distortion to --report")
     add_mirrored(p, "--levels", ManifoldParameterization.remesh, "levels", "subdivision levels")
 
 

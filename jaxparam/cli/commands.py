@@ -217,9 +217,10 @@ def cmd_manifold(args) -> int:
     """``jaxparam manifold MESH -o OUT.obj``: a closed mesh of any genus over a base domain,
     remeshed with subdivision connectivity."""
     from ..manifold import manifold_map
+    from ..manifold.report import fidelity
 
     mesh, clock = begin(args.mesh, compile_cache=False)
-    base, param = manifold_map(mesh, args.base_faces)
+    base, param = manifold_map(mesh, args.base_faces, method=canonical(args.method))
     clock("parameterize")
     semi = param.remesh(args.levels)
     clock("remesh")
@@ -229,6 +230,9 @@ def cmd_manifold(args) -> int:
            "base_vertices": base.n_vertices, "base_faces": base.n_faces, "levels": args.levels,
            "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
            "work_vertices": param.mesh.n_vertices, "seconds": clock}
+    if getattr(args, "fidelity", False):
+        rep["fidelity"] = fidelity(param, semi, mesh).as_dict()
+        clock("fidelity")
     return finish(args, out, None, report=rep, plot=drawing("plot_remesh", semi),
                   line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, genus "
                        f"{t.genus}, subdivision connectivity of order {args.levels} over "

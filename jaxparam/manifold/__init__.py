@@ -1,5 +1,20 @@
-"""Closed meshes of any genus (survey §9): a base domain by decimation, surface triangles,
-a global parameterization over the base domain, and semi-regular remeshing.
+"""Closed meshes of any genus (survey §9): a base domain by decimation, a global
+parameterization over the base domain, and semi-regular remeshing.
+
+Two routes (``manifold_map(..., method=)``):
+
+- ``"maps"`` (the default; :mod:`~jaxparam.manifold.maps`, Lee et al. 1998, the survey's
+  ref. [20]): the map is built *during* the decimation.  Each level collapses a set of
+  half-edges whose one-rings do not meet; before a collapse its one-ring is flattened
+  conformally, the collapse is allowed only when the new triangles are positive there, and
+  every input vertex the ring holds is relocated in the new triangles.  No path is ever
+  traced, so nothing can be blocked: on a closed, oriented, connected mesh it succeeds for
+  every even ``base_faces`` from :func:`fewest_faces` up (the decimation drops its shape
+  rules before it gives up).  The levels are kept (:class:`MapsHistory`), and the remesh
+  runs them backwards, so each remesh vertex is the exact preimage of its base-domain point
+  (the map is a bijection by construction).
+- ``"paths"``: the method of Floater, Hormann and Reimers (ref. [11]) described below; it
+  can fail with a :class:`~jaxparam.SolverError` where paths are walled off.
 
 The method of Floater, Hormann and Reimers (the survey's ref. [11]), in four steps, one
 module each:
@@ -44,6 +59,10 @@ from __future__ import annotations
 
 from .charts import REFERENCE
 from .decimate import decimate
-from .parameterization import ManifoldParameterization, ManifoldStructure, manifold_map
+from .maps import MapsHistory, maps_decimate
+from .parameterization import METHODS, ManifoldParameterization, ManifoldStructure, fewest_faces, manifold_map
+from .report import ManifoldReport, check_closed_manifold, fidelity
 
-__all__ = ["REFERENCE", "decimate", "ManifoldParameterization", "ManifoldStructure", "manifold_map"]
+__all__ = ["REFERENCE", "decimate", "maps_decimate", "MapsHistory", "METHODS", "ManifoldParameterization",
+           "ManifoldStructure", "fewest_faces", "manifold_map", "ManifoldReport", "check_closed_manifold",
+           "fidelity"]

@@ -10,15 +10,18 @@ import numpy as np
 from .. import topology as topo
 from .. import weights as wts
 from ..options import choose
-from ..errors import MeshError, SolverError, TopologyError
+from ..errors import MeshError, SolverError
 from ..mesh import TriMesh
 from ..io import as_mesh
 from ..remesh import Remesh
 from ..subdivision import dyadic_hierarchy, split_corner_values
-from ..triangles import locate
+from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
+from .maps import maps_decimate
+from .overlay import base_charts, draw_faces, unfolding
 from .paths import apply_steps, refine_all, room_for_paths, trace_paths
+from .report import check_closed_manifold, fidelity
 
 __all__ = ["ManifoldParameterization", "ManifoldStructure", "manifold_map"]
 
@@ -48,14 +51,22 @@ class ManifoldStructure:
     input to the parameterized mesh (each new vertex the mean of its parents, see
     :func:`~jaxparam.manifold.paths.apply_steps`); ``topology`` the parameterized mesh's;
     ``charts`` the :class:`~jaxparam.manifold.charts.ChartSystem` (paths, fixed vertices,
-    the solve's pattern); ``located_uv (m, 3, 2)`` the chart coordinates :meth:`lift`
-    locates points in (those of the parameterization :func:`manifold_map` returned)."""
+    the solve's pattern; ``None`` on the ``"maps"`` route, whose charts are the decimation's
+    barycentric coordinates); ``located_uv (m, 3, 2)`` the chart coordinates :meth:`lift`
+    locates points in (those of the parameterization :func:`manifold_map` returned);
+    ``method`` the route; on the ``"maps"`` route ``vertex_bary (n, 3)`` the vertices'
+    barycentric coordinates from the decimation and ``history`` there the
+    :class:`~jaxparam.manifold.maps.MapsHistory` that :meth:`lift` pulls points back through
+    (the exact inverse of the decimation's map)."""
 
     n_input: int
     steps: tuple
     topology: topo.Topology
-    charts: ChartSystem
+    charts: ChartSystem | None
     located_uv: np.ndarray | None = None
+    method: str = "paths"
+    vertex_bary: np.ndarray | None = None
+    history: object = None
 
 
 def _barycentric(T, p):
@@ -79,6 +90,8 @@ def _solve(S: ManifoldStructure, vertices, name):
     concrete = not _traced(Vw)
     W = TriMesh(np.asarray(Vw) if concrete else Vw, S.topology.faces, S.topology,
                 validate=False, name=name)
+    if S.charts is None:                               # maps: the charts do not move with V
+        return W, S.located_uv, S.vertex_bary
     face_uv, vbary = chart_values(S.charts, W)
     if concrete:
         face_uv, vbary = np.asarray(face_uv), np.asarray(vbary)
@@ -96,7 +109,9 @@ class ManifoldParameterization:
     - ``base_faces (m0, 3)``: ``T^0``'s faces over ``base_vertices``;
     - ``region (m,)``: the base face of each mesh face (its surface triangle);
     - ``face_uv (m, 3, 2)``: each mesh face's corners in its base face's chart (the
-      reference triangle :data:`~jaxparam.manifold.REFERENCE`);
+      reference triangle :data:`~jaxparam.manifold.REFERENCE`; on the ``"maps"`` route the
+      base triangle's own shape, the face drawn straight between its corners' images,
+      which :meth:`lift` does not use);
     - ``vertex_face (n,)``, ``vertex_bary (n, 3)``: a base face of each vertex and its
       barycentric coordinates there (``phi^{-1}`` of the vertex);
     - ``structure``: the :class:`ManifoldStructure` (the discrete choices) that
@@ -194,6 +209,13 @@ class ManifoldParameterization:
         X = self.lift(r, q)
         return Remesh(TriMesh(X, F, validate=False, name="manifold_remesh"), H)
 
+    def report(self, levels: int = 4, *, samples: int = 20_000, seed: int = 0):
+        """How faithful the level-``levels`` remesh is: a
+        :class:`~jaxparam.manifold.report.ManifoldReport` (Hausdorff and RMS distances both
+        ways relative to the bounding-box diagonal, the worst area distortion, faces turned
+        over in their charts).  Example: ``param.report(4).hausdorff``."""
+        return fidelity(self, self.remesh(levels), self.mesh, samples=samples, seed=seed)
+
     def lift(self, region: np.ndarray, uv: np.ndarray):
         """Surface points ``(k, 3)`` of chart points ``uv (k, 2)`` (concrete) in base faces
         ``region (k,)``.
@@ -204,8 +226,12 @@ class ManifoldParameterization:
         computed (a discrete choice, held fixed); the barycentric coordinates there come from
         ``face_uv`` and the points from ``mesh.vertices``, both differentiable."""
         S = self.structure
-        ref = S.located_uv if S is not None and S.located_uv is not None else np.asarray(self.face_uv)
         m0 = self.base_faces.shape[0]
+        if S is not None and S.history is not None:
+            face, b = S.history.pull_back(np.asarray(region), barycentric(REFERENCE[None], np.asarray(uv, np.float64)))
+            idx = jnp.asarray(self.mesh.faces[face])
+            return jnp.einsum("kc,kcd->kd", jnp.asarray(b), jnp.asarray(self.mesh.vertices)[idx])
+        ref = S.located_uv if S is not None and S.located_uv is not None else np.asarray(self.face_uv)
         cols = int(np.ceil(np.sqrt(m0)))
         offset = 2.0 * np.stack([np.arange(m0) % cols, np.arange(m0) // cols], 1)
         corners = (ref + offset[self.region][:, None, :]).reshape(-1, 2)
@@ -217,12 +243,33 @@ class ManifoldParameterization:
         return jnp.einsum("kc,kcd->kd", b, jnp.asarray(self.mesh.vertices)[idx])
 
 
-def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_value"):
+METHODS = ("maps", "paths")
+
+
+def fewest_faces(genus: int) -> int:
+    """The fewest base faces :func:`manifold_map` accepts for a closed surface of ``genus``:
+    4 for the sphere (a tetrahedron), ``14 g + 10`` for genus ``g >= 1``.
+
+    Triangulations with fewer faces exist (Ringel and Jungerman: 14 for the torus, 24 for
+    genus 2, 28 for genus 3), but a decimation rarely finds them: measured, half-edge
+    collapses get stuck at 16-18 faces on tori, 28 on a genus-2 and 42 on a genus-3 plate,
+    so the bound keeps a margin and every count from it up succeeds."""
+    return 4 if genus == 0 else 14 * int(genus) + 10
+
+
+def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_value",
+                 method: str = "maps", verbose: bool | None = None):
     """Parameterize a closed mesh of any genus over a decimated base domain (survey §9).
 
     **Arguments:** ``mesh`` closed, one component, orientable; ``base_faces`` the size of the
-    base domain ``T^0`` (even; at least ``4`` for genus 0 and about ``14 g + 10`` for genus
-    ``g``); ``weights`` the convex-combination weights inside the surface triangles.
+    base domain ``T^0`` (even; at least :func:`fewest_faces`: ``4`` for genus 0 and
+    ``14 g + 10`` for genus ``g >= 1``; fewer than the mesh's faces); ``method`` the
+    route: ``"maps"`` (default: the map is built during the decimation, MAPS, Lee et al.
+    1998, so it never gets blocked) or ``"paths"`` (surface edges traced along the mesh's
+    edges, Floater, Hormann and Reimers, with refinement when blocked; can fail with a
+    :class:`SolverError`); ``weights`` the convex-combination weights inside the surface
+    triangles (``"paths"`` only); ``verbose`` the progress bars (default: the library's
+    switch, ``jp.config.progress``).
 
     **Returns:** ``(base, param)``: ``base`` a :class:`TriMesh` ``T^0`` whose vertices are
     mesh vertices (``param.base_vertices``), and a :class:`ManifoldParameterization`
@@ -231,8 +278,9 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     **Differentiation.**  The discrete stages (decimation, refinement, path tracing, surface
     triangles, the charts' connectivity) need concrete positions, so ``manifold_map`` itself
     is not traced: call it eagerly, then differentiate
-    :meth:`ManifoldParameterization.with_vertices`, which re-solves the charts (and so the
-    remesh) for new positions with every discrete choice held fixed.  Under
+    :meth:`ManifoldParameterization.with_vertices`: on the ``"paths"`` route it re-solves the
+    charts for new positions with every discrete choice held fixed; on the ``"maps"`` route
+    the charts (barycentric coordinates) are held fixed and the positions move.  Under
     ``jax.grad``/``jit``/``vmap`` (traced vertices) it raises :class:`MeshError` naming that
     route.
 
@@ -250,20 +298,18 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
                         "positions. Compute `base, param = jp.manifold_map(mesh, base_faces)` "
                         "eagerly, then differentiate `param.with_vertices(V)` (it re-solves the "
                         "charts for positions V with the discrete choices held fixed).")
+    method = choose(method, METHODS, what="method", where="manifold_map")
+    check_closed_manifold(mesh)
     t = mesh.topology
-    if not t.is_closed:
-        raise TopologyError(f"manifold_map: the mesh has {len(t.boundary_loops)} boundary loops; "
-                            "it needs a closed surface (disks: jp.convex_map and jp.remesh).")
-    if t.n_components != 1:
-        raise TopologyError(f"manifold_map: the mesh has {t.n_components} connected components; "
-                            "parameterize each on its own.")
-    least = 4 if t.genus == 0 else 14 * t.genus + 10
+    least = fewest_faces(t.genus)
     if not (isinstance(base_faces, (int, np.integer)) and base_faces % 2 == 0
             and least <= base_faces < t.n_faces):
         raise MeshError(f"manifold_map: base_faces must be an even integer in [{least}, "
                         f"{t.n_faces}) for this genus-{t.genus} mesh of {t.n_faces} faces, got "
                         f"{base_faces!r}.")
     weights = choose(weights, wts.KINDS, what="weights", where="manifold_map")
+    if method == "maps":
+        return _maps_route(mesh, int(base_faces), verbose)
     kept, F0 = decimate(mesh, int(base_faces))
     base_topo = topo.build(F0, kept.size, where="manifold_map")
     if base_topo.genus != t.genus:                      # the link condition should prevent it
@@ -289,4 +335,21 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     W, face_uv, vbary = _solve(S, np.asarray(mesh.vertices), W.name)
     S = replace(S, located_uv=face_uv)
     base = TriMesh(np.asarray(mesh.vertices)[kept], F0, base_topo, validate=False, name="base_domain")
+    return base, ManifoldParameterization(W, kept, F0, region, face_uv, vface, vbary, S)
+
+
+def _maps_route(mesh: TriMesh, base_faces: int, verbose):
+    """:func:`manifold_map` with ``method="maps"``."""
+    V = np.asarray(mesh.vertices, np.float64)
+    kept, F0, vface, vbary, history = maps_decimate(V, mesh.faces, base_faces, verbose=verbose)
+    base_topo = topo.build(F0, kept.size, where="manifold_map")
+    if base_topo.genus != mesh.topology.genus:          # the link condition prevents it
+        raise SolverError(f"manifold_map: the base domain has genus {base_topo.genus}, the mesh "
+                          f"{mesh.topology.genus}.", stage="decimate")
+    U = unfolding(F0, kept.size, base_charts(V[kept], F0))
+    region, face_uv = draw_faces(mesh.faces, vface, vbary, U)
+    S = ManifoldStructure(mesh.n_vertices, (), mesh.topology, None, located_uv=face_uv,
+                          method="maps", vertex_bary=vbary, history=history)
+    base = TriMesh(V[kept], F0, base_topo, validate=False, name="base_domain")
+    W = TriMesh(V, mesh.faces, mesh.topology, validate=False, name=mesh.name)
     return base, ManifoldParameterization(W, kept, F0, region, face_uv, vface, vbary, S)

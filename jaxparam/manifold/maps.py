@@ -1,0 +1,402 @@
+"""MAPS route of :mod:`jaxparam.manifold` (Lee et al. 1998, the survey's ref. [20]): the base
+domain and the map onto it, built together during the decimation, so no path is ever blocked.
+
+The decimation runs in *levels*.  Each level picks a set of half-edge collapses ``u -> w``
+(quadric error, Garland and Heckbert) whose closed one-rings do not meet, and does them all
+at once (vectorized).  Before a collapse, ``u``'s one-ring is flattened conformally
+(``z -> z^a``, ``a = 2 pi / Theta_u``, Theta_u the sum of ``u``'s corner angles); the
+collapse is allowed only when every new triangle ``(w, r_j, r_{j+1})`` is positive in that
+plane, so the new triangles tile the same flat polygon as the old ones.  Every point (an
+input vertex) held by a face of the ring, ``u`` itself included, is placed in the flat ring
+by its barycentric coordinates and located in the new triangles.  At the end every input
+vertex has a base face and barycentric coordinates there: ``phi^{-1}`` of the vertex, a
+bijection onto the base domain up to rounding (each step is a bijection of the flat ring).
+
+A collapse keeps its surviving vertex where it is (``V^0 ⊂ V``); the link condition keeps
+the genus; while possible a collapse may not tilt a face by more than about 78 degrees,
+leave a corner over 150 degrees, or flatten a ring whose exponent ``a`` is off 1 by more
+than about 3.5 % (sharply curved vertices, whose flattening distorts the map most, stay in
+the base domain: this took bunny's level-4 remesh from 1.7 % to 0.9 % of the diagonal).
+The rules are relaxed, then dropped, when no collapse is left.  The levels are kept
+(:class:`MapsHistory`) so points of the base domain can be pulled back exactly.  Work per level is proportional to the faces left, and each level removes a
+fixed share of the vertices, so the whole decimation costs about linear time.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import topology as topo
+from ..errors import SolverError
+from ..progress import progress
+
+__all__ = ["maps_decimate", "MapsHistory"]
+
+#: Rules a collapse must pass, strictest first: (cosine bound of a face's tilt, cosine of the
+#: largest corner allowed in a new face, largest ``|log a|`` of the ring's flattening exponent
+#: ``a``: sharply curved vertices, whose flattening distorts most, stay while others go).  The last level of rules keeps only what the map
+#: needs (positive triangles in the flattened ring) and a face that does not turn over.
+_RULES = ((0.2, np.cos(np.radians(150.0)), 0.035), (0.0, np.cos(np.radians(170.0)), 2.0),
+          (-0.999, -2.0, np.inf))
+
+
+#: Weight of the ring-area term of a collapse's cost against the (normalized) quadric error
+#: (MAPS's priority; 0: off, measured worse on bunny: 1.7 % -> 2.2-4.3 % at level 4).
+AREA_WEIGHT = 0.0
+
+#: Luby rounds per level (each adds collapses whose rings miss the ones already taken).
+ROUNDS = 4
+
+
+def _plane_quadrics(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4)``: the sum over each vertex's faces of the area-weighted plane quadrics."""
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    area2 = np.linalg.norm(nrm, axis=1)
+    unit = nrm / np.maximum(area2, 1e-300)[:, None]
+    p = np.concatenate([unit, -np.sum(unit * V[F[:, 0]], 1, keepdims=True)], axis=1)
+    K = 0.5 * area2[:, None, None] * p[:, :, None] * p[:, None, :]
+    Q = np.zeros((V.shape[0], 4, 4))
+    for c in range(3):
+        np.add.at(Q, F[:, c], K)
+    return Q
+
+
+def _segment_ids(ptr: np.ndarray) -> np.ndarray:
+    return np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
+
+
+class _Level:
+    """The rings of the current mesh (one :func:`topology.build` per level) and the flattened
+    one-ring of every vertex."""
+
+    def __init__(self, V, F, alive_faces, n):
+        self.slots = alive_faces                              # global face slot of each row
+        t = topo.build(F[alive_faces], n, where="manifold_map")
+        self.t = t
+        self.ptr, self.nbr, self.row = t.ring_ptr, t.ring_idx, t.ring_row
+        self.deg = np.diff(self.ptr)
+        self.pos = np.arange(self.nbr.size) - self.ptr[self.row]     # place in its ring
+        self.nxt = self.ptr[self.row] + (self.pos + 1) % np.maximum(self.deg[self.row], 1)
+        # The face of wedge j (u, r_j, r_{j+1}) and the corner of u in it (global slots).
+        wedge = t.ring_wedge
+        self.face = alive_faces[wedge // 3]
+        self.corner = wedge % 3
+        # Conformal flattening of each ring (Lee et al. eq. (1)): angles at u, scaled to 2 pi.
+        e = V[self.nbr] - V[self.row]
+        en = e[self.nxt - 0]
+        d0 = np.linalg.norm(e, axis=1)
+        cosang = np.einsum("ij,ij->i", e, en) / np.maximum(d0 * d0[self.nxt], 1e-300)
+        theta = np.arccos(np.clip(cosang, -1.0, 1.0))
+        total = np.bincount(self.row, weights=theta, minlength=n)
+        a = 2.0 * np.pi / np.maximum(total, 1e-300)
+        start = np.cumsum(theta) - theta
+        phi = a[self.row] * (start - start[self.ptr[self.row]])
+        rho = np.maximum(d0, 1e-300) ** a[self.row]
+        self.z = np.stack([rho * np.cos(phi), rho * np.sin(phi)], 1)   # (nnz, 2)
+        # A ring flattens to a star around u only when every scaled wedge is under pi.
+        widest = np.zeros(n)
+        np.maximum.at(widest, self.row, a[self.row] * theta)
+        self.flat_ok = widest < 0.9 * np.pi
+        self.log_a = np.abs(np.log(np.maximum(a, 1e-300)))
+        wedge_area = 0.5 * np.linalg.norm(np.cross(e, en), axis=1)
+        self.ring_area = np.bincount(self.row, weights=wedge_area, minlength=n)
+
+
+def _orient(p, q, r):
+    return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+
+def _pairs(L: _Level, heads: np.ndarray):
+    """For half-edges ``heads`` (ring entries u -> w = r_k), every wedge j of u's ring that
+    survives the collapse (j not k - 1, k).  **Returns** ``(h, j)`` entry indices."""
+    u = L.row[heads]
+    cnt = L.deg[u]
+    h = np.repeat(heads, cnt)
+    j = L.ptr[np.repeat(u, cnt)] + (np.arange(h.size) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    k = L.pos[h]
+    pj = L.pos[j]
+    du = L.deg[L.row[h]]
+    keep = (pj != k) & (pj != (k - 1) % du)
+    return h[keep], j[keep]
+
+
+def _candidates(L: _Level, V, Q, rules, scale2, top=1):
+    """The valid half-edge collapses and their costs ``(heads, cost)``, among each vertex's
+    ``top`` cheapest targets (all of them when ``top`` is None)."""
+    n = L.deg.size
+    u, w = L.row, L.nbr
+    deg = L.deg
+    apex1 = L.nbr[L.nxt]                                      # r_{k+1}
+    prev = L.ptr[u] + (L.pos - 1) % np.maximum(deg[u], 1)
+    apex0 = L.nbr[prev]                                       # r_{k-1}
+    ok = L.flat_ok[u] & (L.log_a[u] <= rules[2]) & (deg[u] + deg[w] - 4 >= 3) & (deg[apex0] >= 4) & (deg[apex1] >= 4)
+    heads = np.flatnonzero(ok)
+    x = np.concatenate([V[w[heads]], np.ones((heads.size, 1))], 1)
+    Qs = Q[u[heads]] + Q[w[heads]]
+    cost = np.maximum(np.einsum("ki,kij,kj->k", x, Qs, x), 0.0)
+    # A small length term, so flat regions still collapse their shortest edges first.
+    d = V[w[heads]] - V[u[heads]]
+    cost = cost + 1e-3 * np.einsum("ij,ij->i", d, d) ** 2
+    if top is not None:                    # only each vertex's `top` cheapest targets
+        order = np.lexsort((cost, u[heads]))
+        heads, cost = heads[order], cost[order]
+        r = u[heads]
+        start = np.concatenate([[0], np.flatnonzero(r[1:] != r[:-1]) + 1]) if r.size else r
+        rank = np.arange(r.size) - np.repeat(start, np.diff(np.append(start, r.size)))
+        heads, cost = heads[rank < top], cost[rank < top]
+    # Link condition: u and w share exactly their two apexes (count the x in N(u) with
+    # edge (x, w), by sorted edge keys).
+    ekey = u.astype(np.int64) * n + w                          # sorted: CSR rows, then...
+    eorder = np.argsort(ekey, kind="stable")
+    eks = ekey[eorder]
+    hu = L.row[heads]
+    cnt = deg[hu]
+    hh = np.repeat(np.arange(heads.size), cnt)
+    xs = L.nbr[L.ptr[np.repeat(hu, cnt)] + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+    q = xs.astype(np.int64) * n + L.nbr[heads][hh]
+    at = np.clip(np.searchsorted(eks, q), 0, max(eks.size - 1, 0))
+    common = np.bincount(hh, weights=eks[at] == q, minlength=heads.size)
+    keep = common == 2
+    heads, cost = heads[keep], cost[keep]
+    # Geometry: every surviving wedge (u, r_j, r_j+1) -> (w, r_j, r_j+1).
+    h, j = _pairs(L, heads)
+    uu, ww = L.row[h], L.nbr[h]
+    a, b = L.nbr[j], L.nbr[L.nxt[j]]
+    zh, z0, z1 = L.z[h], L.z[j], L.z[L.nxt[j]]
+    flat = _orient(zh, z0, z1)
+    zs = np.abs(zh).sum(1) + np.abs(z0).sum(1) + np.abs(z1).sum(1)
+    good = flat > 1e-12 * zs * zs
+    Vu, Vw, Va, Vb = V[uu], V[ww], V[a], V[b]
+    old = np.cross(Va - Vu, Vb - Vu)
+    new = np.cross(Va - Vw, Vb - Vw)
+    lo, ln = np.sqrt(np.einsum("ij,ij->i", old, old)), np.sqrt(np.einsum("ij,ij->i", new, new))
+    tilt, corner = rules[:2]
+    good &= ln > 1e-14 * scale2
+    good &= np.einsum("ij,ij->i", old, new) > tilt * lo * ln
+    if corner > -1.5:
+        e0, e1, e2 = Va - Vw, Vb - Va, Vw - Vb
+        l0, l1, l2 = (np.sqrt(np.einsum("ij,ij->i", e, e)) + 1e-300 for e in (e0, e1, e2))
+        c0 = -np.einsum("ij,ij->i", e2, e0) / (l2 * l0)
+        c1 = -np.einsum("ij,ij->i", e0, e1) / (l0 * l1)
+        c2 = -np.einsum("ij,ij->i", e1, e2) / (l1 * l2)
+        good &= np.minimum(np.minimum(c0, c1), c2) >= corner
+    bad = np.bincount(h[~good], minlength=u.size)
+    keep = bad[heads] == 0
+    heads, cost = heads[keep], cost[keep]
+    return heads, cost
+
+
+def _independent(L: _Level, heads, cost, limit: int):
+    """Collapses among the candidates whose closed one-rings are pairwise disjoint, cheapest
+    first (Luby rounds: a collapse is taken when it is the cheapest in every closed ring of
+    its closed ring), at most ``limit`` of them.  **Returns** chosen ring entries."""
+    n = L.deg.size
+    # Best target per vertex.
+    order = np.lexsort((cost, L.row[heads]))
+    hs, cs = heads[order], cost[order]
+    first = np.concatenate([[True], L.row[hs][1:] != L.row[hs][:-1]]) if hs.size else np.zeros(0, bool)
+    hs, cs = hs[first], cs[first]
+    rank = np.empty(hs.size, np.int64)
+    rank[np.argsort(cs, kind="stable")] = np.arange(hs.size)
+    cand_u = L.row[hs]
+    key = np.full(n, np.iinfo(np.int64).max)
+    key[cand_u] = rank
+    claimed = np.zeros(n, bool)
+    chosen = []
+    live = np.ones(hs.size, bool)
+    for _ in range(ROUNDS):
+        idx = np.flatnonzero(live)
+        if not idx.size:
+            break
+        uu = cand_u[idx]
+        cnt = L.deg[uu]
+        ent = L.ptr[np.repeat(uu, cnt)] + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+        owner = np.repeat(idx, cnt)
+        xs = np.concatenate([L.nbr[ent], uu])
+        os_ = np.concatenate([owner, idx])
+        # Rings touching a claimed vertex are out for good.
+        hit = np.bincount(os_, weights=claimed[xs], minlength=hs.size) > 0
+        live &= ~hit
+        m = live[os_]
+        xs, os_ = xs[m], os_[m]
+        best = np.full(n, np.iinfo(np.int64).max)
+        np.minimum.at(best, xs, rank[os_])
+        lose = np.bincount(os_, weights=best[xs] != rank[os_], minlength=hs.size) > 0
+        win = np.flatnonzero(live & ~lose)
+        if not win.size:
+            break
+        chosen.append(win)
+        live[win] = False
+        claimed[xs[np.isin(os_, win)]] = True
+    if not chosen:
+        return hs[:0]
+    win = np.concatenate(chosen)
+    win = win[np.argsort(rank[win])][:limit]
+    return hs[win]
+
+
+def _collapse(L: _Level, V, F, alive_f, Q, dead, pf, pb, chosen, face_ptr, face_pts, record=None):
+    """Do the collapses ``chosen`` (ring entries u -> w) at once: faces, quadrics and the
+    points held by the rings' faces (relocated through the flattened rings).  Appends the
+    level's flattened rings to ``record`` (for :func:`pull_back`)."""
+    u, w = L.row[chosen], L.nbr[chosen]
+    du = L.deg[u]
+    # All wedges of each u: entry index j, its face slot, u's corner there.
+    cnt = du
+    j = L.ptr[np.repeat(u, cnt)] + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    which = np.repeat(np.arange(u.size), cnt)
+    f = L.face[j]
+    c = L.corner[j]
+    pj = L.pos[j]
+    k = L.pos[chosen][which]
+    survive = (pj != k) & (pj != (k - 1) % du[which])
+    # 2D corners of each old wedge face, in the face's own corner order.
+    zu = np.zeros((j.size, 2))
+    P_old = np.zeros((j.size, 3, 2))
+    ar = np.arange(j.size)
+    P_old[ar, c] = zu
+    P_old[ar, (c + 1) % 3] = L.z[j]
+    P_old[ar, (c + 2) % 3] = L.z[L.nxt[j]]
+    P_new = P_old.copy()
+    P_new[ar, c] = L.z[chosen][which]
+    # Points held by the ring faces.
+    npt = face_ptr[f + 1] - face_ptr[f]
+    src = np.repeat(ar, npt)
+    pts = face_pts[np.repeat(face_ptr[f], npt) + (np.arange(npt.sum()) - np.repeat(np.cumsum(npt) - npt, npt))]
+    q = np.einsum("kc,kcd->kd", pb[pts], P_old[src])
+    # Candidate new faces: the surviving wedges of the same ring.
+    grp = which[src]
+    sv = np.flatnonzero(survive)
+    sv_ptr = np.zeros(u.size + 1, np.int64)
+    np.cumsum(np.bincount(which[sv], minlength=u.size), out=sv_ptr[1:])
+    nc = sv_ptr[grp + 1] - sv_ptr[grp]
+    pi = np.repeat(np.arange(pts.size), nc)
+    cj = sv[np.repeat(sv_ptr[grp], nc) + (np.arange(nc.sum()) - np.repeat(np.cumsum(nc) - nc, nc))]
+    T = P_new[cj]
+    qq = q[pi]
+    det = _orient(T[:, 0], T[:, 1], T[:, 2])
+    l0 = _orient(qq, T[:, 1], T[:, 2]) / det
+    l1 = _orient(T[:, 0], qq, T[:, 2]) / det
+    bary = np.stack([l0, l1, 1.0 - l0 - l1], 1)
+    depth = bary.min(1)
+    best = np.lexsort((-depth, pi))
+    head = best[np.concatenate([[True], pi[best][1:] != pi[best][:-1]])]
+    b = np.clip(bary[head], 0.0, None)
+    b /= b.sum(1, keepdims=True)
+    pf[pts[pi[head]]] = f[cj[head]]
+    pb[pts[pi[head]]] = b
+    if record is not None:
+        record.append((f, which, survive, P_old, P_new))
+    # Faces: the two wedges at edge u-w die, the rest get w for u.
+    alive_f[f[~survive]] = False
+    F[f[survive], c[survive]] = w[which[survive]]
+    Q[w] += Q[u]
+    dead[u] = True
+
+
+def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, verbose=None):
+    """Decimate a closed manifold mesh to ``base_faces`` faces and map its vertices onto the
+    result (MAPS).
+
+    **Arguments:** ``V (n, 3)`` positions, ``F (m, 3)`` faces of a closed, oriented,
+    connected mesh; ``base_faces`` the faces wanted (even, at least the fewest its genus
+    allows); ``verbose`` the progress bar (default: the library's switch).
+
+    **Returns:** ``(kept (n0,), base_faces (base_faces, 3), vertex_face (n,), vertex_bary
+    (n, 3), history)``: the surviving vertices (increasing indices into ``V``), the base
+    faces over them (indices into ``kept``, the mesh's orientation), for every input vertex
+    its base face and barycentric coordinates in that face's corner order, and the
+    :class:`MapsHistory` that runs the map backwards.
+    """
+    V = np.asarray(V, np.float64)
+    F = np.array(F, np.int64)
+    n, m = V.shape[0], F.shape[0]
+    scale2 = float(np.sum(np.ptp(V, axis=0) ** 2))
+    Q = _plane_quadrics(V, F)
+    alive_f = np.ones(m, bool)
+    dead = np.zeros(n, bool)
+    pf = np.empty(n, np.int64)
+    pf[F.ravel()] = np.repeat(np.arange(m), 3)
+    pb = np.zeros((n, 3))
+    cidx = np.empty(n, np.int64)
+    cidx[F.ravel()] = np.tile(np.arange(3), m)
+    pb[np.arange(n), cidx] = 1.0
+    faces_left = m
+    level_rules = 0
+    levels: list = []
+    with progress(total=(m - base_faces) // 2, desc="decimation", unit="collapse", verbose=verbose) as bar:
+        while faces_left > base_faces:
+            slots = np.flatnonzero(alive_f)
+            L = _Level(V, F, slots, n)
+            heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2)
+            if not heads.size:
+                heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2, top=None)
+            if not heads.size:
+                if level_rules + 1 < len(_RULES):
+                    level_rules += 1
+                    continue
+                raise SolverError(f"manifold_map: decimation stopped at {faces_left} faces: no "
+                                  "collapse keeps the topology and a one-to-one map; ask for more "
+                                  f"than {faces_left} base faces.", stage="decimate")
+            chosen = _independent(L, heads, cost, (faces_left - base_faces) // 2)
+            order = np.argsort(pf, kind="stable")
+            face_ptr = np.zeros(m + 1, np.int64)
+            np.cumsum(np.bincount(pf, minlength=m), out=face_ptr[1:])
+            _collapse(L, V, F, alive_f, Q, dead, pf, pb, chosen, face_ptr, order, levels)
+            faces_left -= 2 * chosen.size
+            bar.update(int(chosen.size))
+    kept = np.flatnonzero(~dead)
+    slots = np.flatnonzero(alive_f)
+    new_of_slot = np.full(m, -1, np.int64)
+    new_of_slot[slots] = np.arange(slots.size)
+    return kept, np.searchsorted(kept, F[slots]), new_of_slot[pf], pb, MapsHistory(tuple(levels), slots)
+
+
+class MapsHistory:
+    """The flattened rings of every level of a MAPS decimation, to run the map backwards.
+
+    ``levels``: per level ``(slot (k,), ring (k,), survive (k,), before (k, 3, 2), after (k,
+    3, 2))`` for the ``k`` wedges of the level's collapsed rings: the face slot, which ring,
+    whether the face survives, and its corners (in the face's corner order) in the ring's
+    flat plane before and after the collapse; ``base_slots (m0,)`` the face slot of each base
+    face."""
+
+    def __init__(self, levels: tuple, base_slots: np.ndarray):
+        self.levels, self.base_slots = levels, base_slots
+
+    def pull_back(self, region: np.ndarray, bary: np.ndarray, *, verbose=None):
+        """The input mesh face ``(k,)`` and barycentric coordinates ``(k, 3)`` of points of
+        the base domain, given by base faces ``region (k,)`` and barycentric coordinates
+        ``bary (k, 3)`` there: the exact inverse of the decimation's map (each level's
+        piecewise-linear map of the flattened rings run backwards)."""
+        slot = self.base_slots[np.asarray(region, np.int64)].copy()
+        b = np.array(bary, np.float64)
+        m = int(max(self.base_slots.max(), max((lv[0].max() for lv in self.levels), default=0))) + 1
+        for f, which, survive, before, after in progress(reversed(self.levels), total=len(self.levels),
+                                                         desc="pull back", unit="level", verbose=verbose):
+            entry = np.full(m, -1, np.int64)
+            entry[f[survive]] = np.flatnonzero(survive)
+            e = entry[slot]
+            hit = np.flatnonzero(e >= 0)
+            if not hit.size:
+                continue
+            q = np.einsum("kc,kcd->kd", b[hit], after[e[hit]])
+            # Candidates: every old wedge of the same ring.
+            grp = which[e[hit]]
+            ptr = np.zeros(int(which.max()) + 2, np.int64)
+            np.cumsum(np.bincount(which, minlength=int(which.max()) + 1), out=ptr[1:])
+            cnt = ptr[grp + 1] - ptr[grp]
+            pi = np.repeat(np.arange(hit.size), cnt)
+            cj = np.repeat(ptr[grp], cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            T = before[cj]
+            qq = q[pi]
+            det = _orient(T[:, 0], T[:, 1], T[:, 2])
+            l0 = _orient(qq, T[:, 1], T[:, 2]) / det
+            l1 = _orient(T[:, 0], qq, T[:, 2]) / det
+            bb = np.stack([l0, l1, 1.0 - l0 - l1], 1)
+            depth = bb.min(1)
+            best = np.lexsort((-depth, pi))
+            head = best[np.concatenate([[True], pi[best][1:] != pi[best][:-1]])]
+            nb = np.clip(bb[head], 0.0, None)
+            slot[hit[pi[head]]] = f[cj[head]]
+            b[hit[pi[head]]] = nb / nb.sum(1, keepdims=True)
+        return slot, b

@@ -1,0 +1,97 @@
+"""Checks before :func:`~jaxparam.manifold.manifold_map` does any work, and the report of how
+faithful its result is.
+
+- :func:`check_closed_manifold` refuses, with the place named, a mesh that is not one closed,
+  oriented 2-manifold (boundary loops, several components, unreferenced vertices);
+  non-manifold edges and bowties are refused earlier by the mesh's own topology.
+- :func:`fidelity` measures a remesh against its input: Hausdorff and RMS distances both
+  ways relative to the bounding-box diagonal (:mod:`jaxparam.distance`), the worst area
+  distortion of the map, and how many mesh faces come out turned over in their chart.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..distance import surface_distance
+from ..errors import MeshError, TopologyError, first_few
+
+__all__ = ["check_closed_manifold", "ManifoldReport", "fidelity"]
+
+
+def check_closed_manifold(mesh, where: str = "manifold_map") -> None:
+    """Raise :class:`~jaxparam.errors.TopologyError` (a :class:`MeshError`) naming the place
+    when ``mesh`` is not one closed, oriented 2-manifold without unused vertices."""
+    t = mesh.topology
+    if not t.is_closed:
+        loops = t.boundary_loops
+        first = loops[0]
+        raise TopologyError(
+            f"{where}: the mesh has {len(loops)} boundary loop(s) (the longest has {first.size} "
+            f"edges, through vertices {first_few(first.tolist())}); it needs a closed surface. "
+            "Close the holes first (jp.disk.fill_holes), or use jp.convex_map and jp.remesh for "
+            "a disk.")
+    if t.n_components != 1:
+        labels = t.components[t.referenced]
+        sizes = np.bincount(labels)
+        reps = [int(np.flatnonzero(t.components == c)[0]) for c in np.argsort(-sizes)[:4]]
+        raise TopologyError(
+            f"{where}: the mesh has {t.n_components} connected components (of "
+            f"{first_few(np.sort(sizes)[::-1].tolist())} vertices; they contain vertices "
+            f"{reps}); parameterize each on its own (split the faces by "
+            "mesh.topology.components).")
+    unused = np.flatnonzero(~t.referenced)
+    if unused.size:
+        raise MeshError(f"{where}: vertices {first_few(unused.tolist())} belong to no face; "
+                        "remove them (they have no place on the surface).")
+
+
+@dataclass(frozen=True)
+class ManifoldReport:
+    """How faithful a closed remesh is (all distances relative to the input's bounding-box
+    diagonal): ``hausdorff`` (both ways), ``hausdorff_in`` (input to remesh),
+    ``hausdorff_out`` (remesh to input), ``rms_in``, ``rms_out``; ``area_distortion`` the
+    worst, over base triangles, of ``max(x, 1/x)``, ``x`` the surface area mapped onto the
+    base triangle over the triangle's own area, relative to the same ratio for the whole
+    surface (1 for a map that spreads the area evenly); ``flipped`` mesh faces whose
+    drawing in their chart (``param.face_uv``) is turned over or missing (on the ``"maps"``
+    route a straight drawing between the corners' images, which the remesh does not use); ``levels`` the remesh's level."""
+
+    hausdorff: float
+    hausdorff_in: float
+    hausdorff_out: float
+    rms_in: float
+    rms_out: float
+    area_distortion: float
+    flipped: int
+    levels: int
+
+    @property
+    def rms(self) -> float:
+        """The larger of the two RMS distances (relative)."""
+        return max(self.rms_in, self.rms_out)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def fidelity(param, semi, mesh, *, samples: int = 20_000, seed: int = 0) -> ManifoldReport:
+    """The :class:`ManifoldReport` of remesh ``semi`` (a :class:`~jaxparam.remesh.Remesh`)
+    of ``mesh`` through ``param`` (a :class:`~jaxparam.manifold.ManifoldParameterization`)."""
+    V = np.asarray(mesh.vertices, np.float64)
+    X = np.asarray(semi.mesh.vertices, np.float64)
+    d = surface_distance(V, mesh.faces, X, semi.mesh.faces, samples=samples, seed=seed)
+    # Area distortion per base triangle: the surface area of the remesh faces above it.
+    F = semi.mesh.faces
+    area = 0.5 * np.linalg.norm(np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]]), axis=1)
+    per = np.bincount(np.arange(F.shape[0]) // (4 ** semi.levels), weights=area)
+    B = np.asarray(param.mesh.vertices, np.float64)[param.base_vertices][param.base_faces]
+    base_area = 0.5 * np.linalg.norm(np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0]), axis=1)
+    ratio = (per / np.maximum(base_area, 1e-300)) * (base_area.sum() / max(per.sum(), 1e-300))
+    worst = float(np.max(np.maximum(ratio, 1.0 / np.maximum(ratio, 1e-300))))
+    u = np.asarray(param.face_uv)
+    s = (u[:, 1, 0] - u[:, 0, 0]) * (u[:, 2, 1] - u[:, 0, 1]) - (u[:, 1, 1] - u[:, 0, 1]) * (u[:, 2, 0] - u[:, 0, 0])
+    return ManifoldReport(hausdorff=d.hausdorff, hausdorff_in=d.hausdorff_ab, hausdorff_out=d.hausdorff_ba,
+                          rms_in=d.rms_ab, rms_out=d.rms_ba, area_distortion=worst,
+                          flipped=int(np.sum(~(s > 0))), levels=int(semi.levels))
