@@ -3,13 +3,19 @@
 Part 1: camelhead refined 0, 1 and 2 times by 1-to-4 splits, its shape-preserving circle map,
 and ``jp.remesh`` at several levels: seconds of the base domain and refinement, of the point
 location in the map, and of the whole call (second call; the first one compiles), peak memory.
-Part 2: ``jp.wavelets.compress`` of camelhead's level-6 remesh, lazy and lifted wavelets:
-share of the data stored and the error against the uncompressed remesh (% of the
-bounding-box diagonal).
+Part 2: ``jp.wavelets.compress`` of camelhead's level-6 remesh (default, area-aware map),
+lazy, lifted and butterfly wavelets: share of the data stored and the error against the
+uncompressed remesh (% of the bounding-box diagonal); the rate-distortion picture (RMS error
+against the fraction of coefficients kept, one curve per wavelet) goes to ``--plot``.
+Part 3 (``--faithful``): the default remesh (area-aware map) of every disk mesh in
+``../shared/data/meshes``: seconds, and per level the Hausdorff (larger way) and RMS
+distance from the input, % of the diagonal (``Remesh.errors``).  Part 4 (``--default-map``):
+seconds of ``jp.remesh(mesh)`` with its default map (``area_aware_map``) at each ``--refine``.
 
 Usage::
 
-    python benchmarks/remesh.py [--refine 0 1 2] [--levels 5 6 7]
+    python benchmarks/remesh.py [--refine 0 1 2] [--levels 5 6 7] [--plot rd.png]
+                                [--faithful] [--default-map]
 """
 from __future__ import annotations
 
@@ -29,9 +35,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--refine", type=int, nargs="*", default=[0, 1, 2])
     ap.add_argument("--levels", type=int, nargs="*", default=[5, 6, 7])
+    ap.add_argument("--plot", default=None, help="rate-distortion picture (PNG)")
+    ap.add_argument("--faithful", action="store_true", help="errors of every disk mesh")
+    ap.add_argument("--default-map", action="store_true", help="time the default map too")
+    ap.add_argument("--samples", type=int, default=20_000, help="points per surface (errors)")
     args = ap.parse_args()
     import jaxparam as jp
-    from jaxparam.remesh import base_domain, refine_domain
+    from jaxparam.remesh import area_aware_map, base_domain, measure_errors, refine_domain
     from jaxparam.triangles import locate
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
@@ -66,22 +76,73 @@ def main() -> int:
             print(f"{mesh.n_faces:12d} {levels:6d} {semi.mesh.n_faces:12d} {t_refine:9.3f} {t_locate:9.3f} "
                   f"{t_all:9.3f} {off:18.1e} {peak:8.0f}", flush=True)
 
+    if args.default_map:
+        print(f"\n{'input faces':>12s} {'map s':>8s} {'remesh s':>9s}  (jp.remesh(mesh, levels=6): area-aware map)")
+        for r in args.refine:
+            mesh = jp.shapes.refine(base, r) if r else base
+            t = time.perf_counter()
+            uv = np.asarray(area_aware_map(mesh))
+            t_map = time.perf_counter() - t
+            t = time.perf_counter()
+            np.asarray(jp.remesh(mesh, uv, levels=6).mesh.vertices)
+            print(f"{mesh.n_faces:12d} {t_map:8.2f} {time.perf_counter() - t:9.2f}", flush=True)
+
+    if args.faithful:
+        folder = DATA.parent
+        print(f"\ndefault remesh (area-aware map), level by level: Hausdorff / RMS, % of the diagonal "
+              f"({args.samples} samples per surface)")
+        for path in sorted(folder.iterdir()):
+            try:
+                mesh = jp.load(path)
+            except jp.MeshError:
+                continue
+            if not mesh.topology.is_disk:
+                continue
+            t = time.perf_counter()
+            semi = jp.remesh(mesh, levels=6, errors=False)
+            sec = time.perf_counter() - t
+            e = measure_errors(mesh, semi, samples=args.samples)
+            cells = " ".join(f"{100 * h:.3f}/{100 * r:.4f}" for h, r in zip(e.hausdorff, e.rms))
+            print(f"{path.name:>16s} {mesh.n_faces:7d} faces {sec:7.1f} s  {cells}", flush=True)
+
     mesh = base
-    semi = jp.remesh(mesh, jp.convex_map(mesh), levels=6)
+    semi = jp.remesh(mesh, levels=6)
     V = np.asarray(semi.mesh.vertices)
     diag = np.linalg.norm(np.ptp(V, axis=0))
     print(f"\ncompression of camelhead's level-6 remesh ({semi.mesh.n_vertices} vertices)")
-    print(f"{'wavelet':>8s} {'keep':>6s} {'stored %':>9s} {'RMS err %':>10s} {'max err %':>10s} {'seconds':>8s}")
-    for wavelet in ("lazy", "lifted"):
+    print(f"{'wavelet':>9s} {'keep':>6s} {'stored %':>9s} {'RMS err %':>10s} {'max err %':>10s} "
+          f"{'/ lazy':>7s} {'seconds':>8s}")
+    keeps = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2)
+    curves = {}
+    for wavelet in jp.wavelets.WAVELETS:
         jp.wavelets.compress(semi, 0.01, wavelet=wavelet)       # compiles
-        for keep in (0.01, 0.02, 0.05, 0.1, 0.2):
+        curves[wavelet] = []
+        for keep in keeps:
             t = time.perf_counter()
             small = jp.wavelets.compress(semi, keep, wavelet=wavelet)
             X = np.asarray(small.mesh.vertices)
             sec = time.perf_counter() - t
             e = np.linalg.norm(X - V, axis=1) / diag
-            print(f"{wavelet:>8s} {keep:6.2f} {100 * small.stored_fraction:9.2f} "
-                  f"{100 * np.sqrt(np.mean(e ** 2)):10.3f} {100 * e.max():10.3f} {sec:8.3f}")
+            rms = 100 * np.sqrt(np.mean(e ** 2))
+            curves[wavelet].append(rms)
+            ratio = rms / curves["lazy"][len(curves[wavelet]) - 1] if "lazy" in curves else 1.0
+            print(f"{wavelet:>9s} {keep:6.3f} {100 * small.stored_fraction:9.2f} "
+                  f"{rms:10.4f} {100 * e.max():10.3f} {ratio:7.2f} {sec:8.3f}")
+    if args.plot:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, ax = plt.subplots(figsize=(5, 3.6))
+        for wavelet, rms in curves.items():
+            ax.loglog([100 * k for k in keeps], rms, "o-", label=wavelet)
+        ax.set_xlabel("coefficients kept (%)")
+        ax.set_ylabel("RMS error (% of diagonal)")
+        ax.set_title("camelhead, level-6 remesh: rate-distortion")
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=120)
+        plt.close(fig)
+        print(f"rate-distortion picture: {args.plot}")
     return 0
 
 

@@ -131,7 +131,6 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
     corners = V[F]                                             # (m, 3, 3)
     centroid = corners.mean(axis=1)
     reach = np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)
-    r_max = float(reach.max())
     tree = cKDTree(centroid)
     k = int(min(max(k, 1), m))
     d_out = np.empty(len(P))
@@ -153,16 +152,31 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
         q_out[lo:lo + len(Pc)] = q.reshape(len(Pc), k, 3)[rows, best]
         kth[lo:lo + len(Pc)] = cdist[:, -1]
 
-    # completeness: a face not among the k candidates has centroid distance >= cdist[:, -1],
-    # hence distance >= cdist[:, -1] - r_max; points whose best is above that bound are redone
+    # completeness: faces are grouped by their reach (centroid to farthest corner) in powers of
+    # two; a face of group g not among the k candidates is at least (its centroid distance -
+    # R_g) away, where R_g is the group's largest reach.  Per group, points whose best distance
+    # exceeds that bound for the group's nearest centroid are re-queried within d + R_g, so a
+    # few long faces never widen the search around the many short ones.
     if k < m:
-        unsure = np.flatnonzero(d_out > kth - r_max)
-        if len(unsure):
-            lists = tree.query_ball_point(P[unsure], d_out[unsure] + r_max)
+        ratio = reach / max(float(np.median(reach)), 1e-300)
+        group = np.clip(np.ceil(np.log2(np.maximum(ratio, 1.0))), 0, 30).astype(np.int64)
+        for g in np.unique(group):
+            members = np.flatnonzero(group == g)
+            r_g = float(reach[members].max())
+            sub = cKDTree(centroid[members])
+            near, _ = sub.query(P, k=1)
+            unsure = np.flatnonzero(d_out > near - r_g)
+            if not len(unsure):
+                continue
+            lists = sub.query_ball_point(P[unsure], d_out[unsure] + r_g)
             counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
+            if not counts.sum():
+                continue
             rows = np.repeat(unsure, counts)
-            cand = np.concatenate([np.asarray(x, np.int64) for x in lists]) if len(rows) else rows
+            cand = members[np.concatenate([np.asarray(x, np.int64) for x in lists])]
             r, d, face, q = _best_of(P, V, F, rows, cand)
+            better = d < d_out[r]
+            r, d, face, q = r[better], d[better], face[better], q[better]
             d_out[r], f_out[r], q_out[r] = d, face, q
     return d_out, f_out, q_out
 

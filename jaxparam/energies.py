@@ -11,7 +11,15 @@ values ``s1 >= s2``; *barrier* energies are ``+inf`` where ``det J <= 0``.
 Names (as in the design): ``condition_2`` (E1), ``mips`` (E2),
 ``condition_2_squared`` (E3), ``condition_f_squared`` (E4), ``angle``
 (Sheffer–de Sturler), ``green_lagrange`` (Maillot), ``symmetric_dirichlet``,
-``arap``, ``conformal`` (LSCM), ``dirichlet``.
+``arap``, ``conformal`` (LSCM), ``dirichlet``, ``stretch`` (Sander et al.'s L2 stretch).
+
+**Kinks.** ``s1`` and ``s2`` alone are not differentiable where a face is conformal
+(``s1 = s2``); symmetric functions of them are (every energy here but two).
+``condition_2`` (``s1 / s2``) and ``condition_2_squared`` kink there, as ``|x|`` does: at an
+exactly conformal face JAX returns the mean of the two one-sided derivatives (the safe
+square root in :func:`jaxparam.geometry.singular_values` gives ``s1 - s2`` a zero
+gradient), and near one the energy's curvature grows like ``1 / (s1 - s2)``, so finite
+differences need steps well below ``s1 - s2`` (tests/test_gradients.py).
 """
 from __future__ import annotations
 
@@ -265,6 +273,11 @@ ENERGIES: dict[str, Energy] = {
     "arap": _from_sv("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, barrier=False),
     "conformal": _from_sv("conformal", lambda s1, s2: 0.5 * (s1 - s2) ** 2, True, barrier=False),
     "dirichlet": _from_J("dirichlet", lambda J: 0.5 * jnp.sum(J ** 2), barrier=False),
+    # Sander et al. 2001 (survey ref. [27]): the L2 stretch of the inverse map UV -> surface,
+    # whose singular values are 1/s2 >= 1/s1: (Gamma^2 + gamma^2) / 2; its area-weighted mean
+    # is L2(M)^2.  Penalizes UV triangles small for their 3D area (the squeeze that starves
+    # a remesh of samples); not scale invariant, so minimize it with a fixed boundary.
+    "stretch": _from_sv("stretch", lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2)),
 }
 
 

@@ -134,6 +134,11 @@ def check_04(ns, out):
     assert ns["err"] < 1e-12
     # The remesh's details are differentiable in the input positions: against a difference.
     assert_gradient_matches_fd(ns["g"], ns["detail_energy"], ns["mesh"].vertices, h=1e-6, rtol=1e-5)
+    assert_png(out, "nb04_rate_distortion.png")
+    assert ns["kept"] < 1e-12 and ns["moved"] > 0.1                      # editing keeps details
+    assert ns["rd"]["butterfly"][2] < ns["rd"]["lazy"][2]                 # 5 %: butterfly beats lazy
+    e = ns["semi_area"].errors
+    assert all(a > b for a, b in zip(e.rms, e.rms[1:]))
 
 
 def check_05(ns, out):

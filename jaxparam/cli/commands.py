@@ -173,16 +173,24 @@ def cmd_fit(args) -> int:
 def cmd_remesh(args) -> int:
     """``jaxparam remesh MESH -o OUT.obj``: subdivision connectivity over a base domain."""
     from ..linear import convex_map
-    from ..remesh import remesh
+    from ..remesh import area_aware_map, measure_errors, remesh
 
     mesh, clock = begin(args.mesh)
-    uv = convex_map(mesh, weights=canonical(args.weights), boundary=canonical(args.boundary))
+    # circle (the default): the area-aware map (L2 stretch minimized inside the circle);
+    # square: the plain convex-combination map, as before.
+    if canonical(args.boundary) == "circle":
+        uv = area_aware_map(mesh, weights=canonical(args.weights))
+    else:
+        uv = convex_map(mesh, weights=canonical(args.weights), boundary=canonical(args.boundary))
     clock("parameterize")
     semi = remesh(mesh, uv, levels=args.levels, base_faces=args.base_faces)
     clock("remesh")
-    rep = report_dict(semi.mesh, semi.uv, seconds=clock, extra={
-        "levels": args.levels, "base_faces": int(semi.base_faces.shape[0]),
-        "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces})
+    extra = {"levels": args.levels, "base_faces": int(semi.base_faces.shape[0]),
+             "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces}
+    if getattr(args, "report", None):
+        extra["errors"] = measure_errors(mesh, semi).as_dict()
+        clock("errors")
+    rep = report_dict(semi.mesh, semi.uv, seconds=clock, extra=extra)
     return finish(args, semi.mesh, semi.uv, report=rep, plot=drawing("plot_remesh", semi),
                   line=f"{args.output}: {semi.mesh.n_vertices} vertices, "
                        f"{semi.mesh.n_faces} faces, "

@@ -1,0 +1,208 @@
+"""Faithful remeshing (issue 15, survey §7): the area-aware default map, the per-level error
+report, the butterfly wavelet and multiresolution editing."""
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import jaxparam as jp
+from jaxparam import geometry as geo
+from jaxparam.energies import ENERGIES
+from jaxparam.remesh import RemeshErrors, area_aware_map, measure_errors
+from jaxparam.wavelets import analyze, butterfly_stencil, compress, synthesize
+
+
+def bumpy(n=10):
+    """A curved disk: a grid over [-1, 1]^2 lifted onto two Gaussian bumps (one off-centre,
+    which a circle convex map squeezes towards the boundary)."""
+    g = jp.shapes.plane_grid(n, n)
+    U = np.asarray(g.vertices)[:, :2] * 2 - 1
+    z = 0.8 * np.exp(-8 * ((U[:, 0] - 0.6) ** 2 + (U[:, 1] - 0.5) ** 2)) + 0.3 * np.exp(-3 * np.sum(U ** 2, 1))
+    return jp.TriMesh(np.column_stack([U, z]), g.faces)
+
+
+def uv_area_over_3d(mesh, uv):
+    return (np.asarray(geo.signed_areas(jnp.asarray(uv), mesh.faces))
+            / np.asarray(geo.face_areas(jnp.asarray(mesh.vertices), mesh.faces)))
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return bumpy(10)
+
+
+@pytest.fixture(scope="module")
+def semi(mesh):
+    return jp.remesh(mesh, levels=4, errors=True, samples=2000)
+
+
+def test_stretch_energy_is_sanders_l2_stretch():
+    en = ENERGIES["stretch"]
+    for s1, s2 in [(1.0, 1.0), (2.0, 0.5), (3.0, 3.0)]:
+        J = jnp.diag(jnp.array([s1, s2]))
+        assert float(en.of_J(J)) == pytest.approx(0.5 * (s1 ** -2 + s2 ** -2), rel=1e-14)
+    assert float(en.of_J(jnp.diag(jnp.array([1.0, -1.0])))) == np.inf       # a barrier
+    # Sander et al.'s Gamma, gamma: singular values of the inverse Jacobian.
+    J = jnp.array([[1.3, 0.4], [-0.2, 0.7]])
+    g = np.linalg.svd(np.linalg.inv(np.asarray(J)), compute_uv=False)
+    assert float(en.of_J(J)) == pytest.approx(0.5 * np.sum(g ** 2), rel=1e-12)
+
+
+@pytest.mark.slow
+def test_the_area_aware_map_has_no_flip_and_spreads_area_evenly(mesh):
+    uv = np.asarray(area_aware_map(mesh))
+    assert np.all(np.asarray(geo.signed_areas(jnp.asarray(uv), mesh.faces)) > 0)      # no flip
+    loop = mesh.topology.boundary_loops[0]
+    np.testing.assert_allclose(np.linalg.norm(uv[loop], axis=1), 1.0, atol=1e-12)   # circle, fixed
+    tutte = np.asarray(jp.convex_map(mesh))
+    # UV area per 3D area: the convex map squeezes (a wide spread), the area-aware map less.
+    spread = lambda r: np.quantile(r, 0.95) / np.quantile(r, 0.05)
+    assert spread(uv_area_over_3d(mesh, uv)) < 0.75 * spread(uv_area_over_3d(mesh, tutte))
+    st = ENERGIES["stretch"]
+    assert float(st(mesh, uv)) < float(st(mesh, tutte))
+
+
+def test_the_default_remesh_uses_the_area_aware_map_and_a_given_uv_is_honoured(mesh, semi):
+    uv = area_aware_map(mesh)
+    again = jp.remesh(mesh, uv, levels=4)
+    np.testing.assert_allclose(np.asarray(again.mesh.vertices), np.asarray(semi.mesh.vertices), atol=1e-12)
+    tutte = jp.remesh(mesh, jp.convex_map(mesh), levels=4)
+    assert not np.allclose(np.asarray(tutte.mesh.vertices), np.asarray(semi.mesh.vertices))
+    assert again.errors is None and isinstance(semi.errors, RemeshErrors)
+
+
+def test_the_error_falls_with_the_level_on_a_curved_surface(mesh, semi):
+    e = semi.errors
+    assert e.levels == (0, 1, 2, 3, 4) and len(e.hausdorff_ab) == 5
+    assert all(a > b for a, b in zip(e.rms, e.rms[1:])), e.rms
+    assert all(a > b for a, b in zip(e.hausdorff[1:], e.hausdorff[2:])), e.hausdorff
+    assert e.hausdorff[-1] < 0.5 * e.hausdorff[1] and e.rms[-1] < 0.1 * e.rms[1]
+    d = e.as_dict()
+    assert d["hausdorff"] == list(e.hausdorff) and d["rms_ba"] == list(e.rms_ba)
+
+
+def test_the_area_aware_map_remeshes_closer_than_the_convex_map(mesh, semi):
+    tutte = jp.remesh(mesh, jp.convex_map(mesh), levels=4, errors=True, samples=2000)
+    assert semi.errors.rms[-1] < tutte.errors.rms[-1]
+
+
+def test_a_planar_mesh_remeshes_exactly():
+    mesh = jp.shapes.plane_grid(9, 9, tilt=True)
+    uv = np.asarray(jp.shapes.plane_grid(9, 9).vertices)[:, :2]
+    loop = list(mesh.topology.boundary_loops[0])
+    corners = sorted(loop.index(v) for v in (0, 8, 72, 80))
+    e = jp.remesh(mesh, uv, levels=2, corners=corners, errors=True, samples=2000).errors
+    assert max(e.hausdorff_ba) < 1e-12                 # every level lies in the plane
+    assert e.hausdorff[-1] < 1e-12 and e.rms[0] < 1e-12  # and covers the whole square
+    # The default (area-aware) map: still in the plane at every level.
+    e = jp.remesh(mesh, levels=2, errors=True, samples=2000).errors
+    assert max(e.hausdorff_ba) < 1e-12
+
+
+def brute_distance(P, V, F, per_face=5000):
+    """Independent check: distance to a dense, regular barycentric sampling of every face."""
+    k = int(np.sqrt(2 * per_face))
+    a, b = np.meshgrid(np.arange(k + 1), np.arange(k + 1))
+    keep = a + b <= k
+    w = np.column_stack([a[keep], b[keep]]) / k
+    B = np.column_stack([1 - w.sum(1), w])
+    T = V[F]
+    S = np.einsum("sc,fcd->fsd", B, T).reshape(-1, 3)
+    return cKDTree(S).query(P)[0]
+
+
+@pytest.mark.slow
+def test_the_reported_error_agrees_with_an_independent_measurement():
+    mesh = bumpy(6)
+    semi = jp.remesh(mesh, levels=2, errors=True, samples=20000)
+    V, X = np.asarray(mesh.vertices), np.asarray(semi.mesh.vertices)
+    diag = np.linalg.norm(np.ptp(V, 0))
+    rng = np.random.default_rng(5)
+    for lv in (1, 2):
+        n, F = semi.hierarchy.counts[lv], semi.hierarchy.faces[lv]
+        # an independent sample (uniform by area, another generator) measured by brute force
+        def sample(W, G, m):
+            T = W[G]
+            A = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+            f = rng.choice(len(G), m, p=A / A.sum())
+            r = rng.random((m, 2))
+            r = np.where(r.sum(1, keepdims=True) > 1, 1 - r, r)
+            return T[f, 0] + r[:, :1] * (T[f, 1] - T[f, 0]) + r[:, 1:] * (T[f, 2] - T[f, 0])
+        d_ab = brute_distance(np.concatenate([sample(V, mesh.faces, 20000), V]), X[:n], F) / diag
+        d_ba = brute_distance(np.concatenate([sample(X[:n], F, 20000), X[:n]]), V, mesh.faces) / diag
+        e = semi.errors
+        assert e.hausdorff_ab[lv] == pytest.approx(d_ab.max(), rel=0.1)
+        assert e.hausdorff_ba[lv] == pytest.approx(d_ba.max(), rel=0.1)
+        assert e.rms_ab[lv] == pytest.approx(np.sqrt(np.mean(d_ab ** 2)), rel=0.1)
+        assert e.rms_ba[lv] == pytest.approx(np.sqrt(np.mean(d_ba ** 2)), rel=0.1)
+
+
+def test_the_butterfly_stencil_has_the_butterfly_weights(semi):
+    H = semi.hierarchy
+    for lv in range(H.levels):
+        idx, w = butterfly_stencil(H, lv)
+        np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-15)
+        # on a regular stretch of the mesh the stencil is the textbook one: p, q, c, d, 4 wings
+        eight = np.sum(w != 0, 1) == 8                # no wing reflected, not on the boundary
+        if eight.any():
+            np.testing.assert_allclose(np.sort(w[eight][w[eight] != 0].reshape(-1, 8), 1),
+                                       np.sort(jp.wavelets.BUTTERFLY)[None].repeat(eight.sum(), 0))
+        assert np.all(np.isin(idx, np.arange(H.counts[lv])))
+    full = butterfly_stencil(H, H.levels - 1)[1]
+    assert np.mean(full[:, 2] == 0.125) > 0.5          # most fine edges see their butterfly
+
+
+@pytest.mark.parametrize("wavelet", ["butterfly", "lifted", "lazy"])
+def test_analysis_and_synthesis_are_exact_and_differentiable(semi, wavelet):
+    X = jnp.asarray(semi.mesh.vertices)
+    c = analyze(semi, wavelet=wavelet)
+    np.testing.assert_allclose(np.asarray(synthesize(c)), np.asarray(X), atol=1e-12)
+    f = lambda Y: synthesize(analyze(semi.with_vertices(Y), wavelet=wavelet))
+    t = jax.random.normal(jax.random.PRNGKey(1), X.shape, dtype=jnp.float64)
+    np.testing.assert_allclose(np.asarray(jax.jvp(f, (X,), (t,))[1]), np.asarray(t), atol=1e-12)
+
+
+def test_the_butterfly_wavelet_compresses_better_than_the_lazy_one(semi):
+    V = np.asarray(semi.mesh.vertices)
+    rms = {w: np.sqrt(np.mean(np.sum((np.asarray(compress(semi, 0.05, wavelet=w).mesh.vertices) - V) ** 2, 1)))
+           for w in ("lazy", "lifted", "butterfly")}
+    assert rms["butterfly"] < 0.85 * rms["lazy"], rms
+    assert jp.wavelets.compress.__kwdefaults__["wavelet"] == "butterfly"
+
+
+@pytest.mark.parametrize("wavelet", ["butterfly", "lazy"])
+def test_moving_a_base_vertex_keeps_the_details(semi, wavelet):
+    c = analyze(semi, wavelet=wavelet)
+    k = 0                                              # a base corner on the boundary
+    delta = jnp.array([0.0, 0.0, 0.3])
+    edited = synthesize(c.with_base(c.base.at[k].add(delta)))
+    again = analyze(semi.with_vertices(edited), wavelet=wavelet)
+    for a, b in zip(again.details, c.details):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-12)   # details kept
+    move = np.asarray(edited) - np.asarray(semi.mesh.vertices)
+    # the edit is the synthesis of the base change alone (linear), along delta only
+    zero = tuple(jnp.zeros_like(d) for d in c.details)
+    alone = synthesize(type(c)(jnp.zeros_like(c.base).at[k].set(delta), zero, c.hierarchy, wavelet))
+    np.testing.assert_allclose(move, np.asarray(alone), atol=1e-12)
+    np.testing.assert_allclose(move[:, :2], 0.0, atol=1e-12)
+    # it moves the surface most near the vertex and fades with the distance in the domain
+    U = np.asarray(semi.uv)
+    r = np.linalg.norm(U - U[k], axis=1)
+    assert move[np.argmin(r), 2] > 0.25 and np.abs(move[r > 1.2, 2]).max() < 0.05
+    with pytest.raises(jp.MeshError, match="new base must have shape"):
+        c.with_base(np.zeros((3, 3)))
+
+
+def test_cli_remesh_report_has_the_errors_per_level(tmp_path):
+    import json
+
+    from jaxparam.cli import main
+
+    src, out, rep = tmp_path / "b.obj", tmp_path / "semi.obj", tmp_path / "r.json"
+    jp.save(src, bumpy(6))
+    assert main(["remesh", str(src), "-o", str(out), "--levels", "2", "--report", str(rep)]) == 0
+    e = json.loads(rep.read_text())["errors"]
+    assert e["levels"] == [0, 1, 2] and len(e["hausdorff_ab"]) == 3 and len(e["rms_ba"]) == 3
+    assert e["relative_to"] == "input bounding-box diagonal"
+    assert e["rms"][2] < e["rms"][1] < e["rms"][0]
