@@ -21,10 +21,11 @@ import numpy as np
 from . import boundary as bmap
 from . import geometry as geo
 from . import weights as wts
+from .errors import MeshError
 from .io import as_mesh
 
 __all__ = ["DistortionReport", "Theorem1", "distortion", "face_distortion", "flips",
-           "boundary_overlaps", "theorem1"]
+           "boundary_overlaps", "theorem1", "refuse_traced"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,20 @@ class DistortionReport:
         return d
 
 
+def refuse_traced(where: str, mesh, uv, *, vertices: bool = True) -> None:
+    """Raise a :class:`MeshError` when ``uv`` (or, with ``vertices``, the mesh's vertices) is a
+    JAX tracer: the reports and counts of this module are host floats and integers (not
+    differentiable).  The counts that read only the UVs pass ``vertices=False``."""
+    traced_v = vertices and isinstance(getattr(mesh, "vertices", None), jax.core.Tracer)
+    if isinstance(uv, jax.core.Tracer) or traced_v:
+        raise MeshError(
+            f"{where}: not differentiable (a report of host floats and counts, computed in numpy) "
+            "and it got a JAX tracer (under jax.grad, jax.jit or jax.vmap); differentiate "
+            "jp.metrics.face_distortion(mesh, uv) (J, s1, s2 and the areas, in JAX) or an energy "
+            "such as jp.ENERGIES['symmetric_dirichlet'](mesh, uv) instead, and call "
+            f"{where} on concrete values.")
+
+
 @jax.jit
 def _face_quantities(V, F, uv):
     J = geo.jacobians(V, F, uv)
@@ -82,6 +97,7 @@ def face_distortion(mesh, uv) -> dict:
 
 def flips(mesh, uv) -> int:
     """Number of faces whose UV image is clockwise or degenerate (signed area <= 0)."""
+    refuse_traced("metrics.flips", mesh, uv, vertices=False)
     return int(np.sum(np.asarray(geo.signed_areas(jnp.asarray(uv), mesh.faces)) <= 0))
 
 
@@ -92,6 +108,7 @@ def boundary_overlaps(mesh, uv) -> int:
     itself; this counts such crossings (bounding boxes first, exact
     orientation tests after, in chunks).
     """
+    refuse_traced("metrics.boundary_overlaps", mesh, uv, vertices=False)
     U = np.asarray(uv, np.float64)
     segs = []
     for loop in mesh.topology.boundary_loops:
@@ -132,6 +149,7 @@ def theorem1(mesh, uv, *, weights=None) -> Theorem1:
     name or ``(k,)`` values on the ring entries), or None when unknown (then
     ``positive_weights`` is None and ``holds`` only reflects the boundary).
     """
+    refuse_traced("metrics.theorem1", mesh, uv, vertices=isinstance(weights, str))
     t = mesh.topology
     U = np.asarray(uv, np.float64)
     if not t.boundary_loops:
@@ -178,8 +196,13 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
 
         rep = jp.distortion(mesh, uv)
         rep.flips, rep.sym_dirichlet, rep.max_aspect
+
+    Not differentiable (host floats and counts): a traced ``uv`` or mesh is refused with a
+    :class:`MeshError` that names :func:`face_distortion`, whose ``J``, ``s1``, ``s2`` and
+    areas are JAX and differentiable.
     """
     mesh = as_mesh(mesh, "distortion")
+    refuse_traced("distortion", mesh, uv)
     fd = face_distortion(mesh, uv)
     s1 = np.asarray(fd["s1"])
     s2 = np.asarray(fd["s2"])

@@ -169,6 +169,7 @@ CHECKS = {
     "03_unorganized_points": check_03,
     "04_remeshing_and_wavelets": check_04,
     "05_closed_meshes": check_05,
+    "06_optimize_through_the_map": check_06,
 }
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import jax
 import numpy as np
 
 from .. import topology as topo
@@ -85,6 +86,12 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     """
     if unknown:
         raise PointCloudError(f"reconstruct_surface: unknown options {sorted(unknown)}.")
+    if isinstance(points, jax.core.Tracer):
+        raise PointCloudError(
+            "reconstruct_surface: not differentiable (Delaunay triangulation, edge flips and "
+            "region growing are discrete) and it got a JAX tracer; differentiate "
+            "jp.meshless_map(points, graph=..., boundary_indices=...) or the reconstructed mesh's "
+            "own maps (e.g. jp.convex_map(jp.TriMesh(P, rec.mesh.faces))) instead.")
     weights, boundary, spacing = check_map_options("reconstruct_surface", weights, boundary, spacing)
     with reuse_freed_memory(np.shape(points)[0] if np.ndim(points) == 2 else 0):
         return _reconstruct(points, k=k, radius=radius, symmetric=symmetric, weights=weights,
