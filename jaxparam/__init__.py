@@ -55,6 +55,7 @@ _NAMES = {
     "to_trimesh": ("io", "to_trimesh"), "from_trimesh": ("io", "from_trimesh"),
     "as_mesh": ("io", "as_mesh"), "checker_texture": ("io", "checker_texture"),
     "boundary_loop": ("boundary", "boundary_loop"),
+    "atlas": ("atlas", "atlas"), "Atlas": ("atlas", "Atlas"), "atlas_uv": ("atlas", "atlas_uv"),
 }
 
 #: Submodules reachable as ``jp.<name>``.
@@ -108,5 +109,5 @@ __all__ = [
     "fitting", "fit_surface", "plot", "remesh", "wavelets", "manifold", "manifold_map",
     "options", "triangles", "subdivision", "io", "disk", "combination", "Reconstruction", "Remesh",
     "config", "distance", "to_trimesh", "from_trimesh", "as_mesh", "checker_texture",
-    "boundary_loop",
+    "boundary_loop", "atlas", "Atlas", "atlas_uv",
 ]

@@ -174,7 +174,7 @@ def test_python_m_jaxparam_cli_and_the_pipeline_are_importable():
 # --- issue 16: help with examples and defaults, --version, --quiet, output format first,
 # the unconverged warning, a GLB with its checker texture ---------------------------------
 
-SUBCOMMANDS = ["info", "flatten", "meshless", "fit", "remesh", "compress", "manifold",
+SUBCOMMANDS = ["info", "flatten", "meshless", "fit", "remesh", "compress", "manifold", "atlas",
                "batch"]
 
 

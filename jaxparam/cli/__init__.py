@@ -35,6 +35,7 @@ from ..remesh import remesh
 from ..wavelets import WAVELETS, compress
 from ..weights import KINDS as WEIGHT_KINDS
 from . import batch, commands
+from .atlas import add_atlas_parser
 from .arguments import HelpFormatter, add_flatten_options, add_mirrored, add_named, subparser, version
 from .pipeline import EXIT_INTERRUPTED, failure, flatten_mesh, report_dict, write_json
 
@@ -104,6 +105,7 @@ def _add_commands(sub) -> None:
                         "relative to the diagonal) and its worst area distortion to --report")
     add_mirrored(p, "--levels", ManifoldParameterization.remesh, "levels", "subdivision levels")
 
+    add_atlas_parser(sub, _command)
 
 
 def build_parser() -> argparse.ArgumentParser:

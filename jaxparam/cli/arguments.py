@@ -37,6 +37,7 @@ EXAMPLES = {
               "--plot remesh.png",
     "compress": "jaxparam compress semi.obj -o small.obj --keep 0.02 --wavelet lifted",
     "manifold": "jaxparam manifold bunny.off -o bunny_semi.obj --base-faces 100 --levels 3",
+    "atlas": "jaxparam atlas bunny.off -o bunny_atlas.glb --texture-size 1024 --plot atlas.png",
     "batch": "jaxparam batch meshes/ -o flat/ --weights mean-value --workers 2\n"
              "  jaxparam batch meshes/ -o flat/ --engine ray      (pip install 'jaxparam[ray]')",
 }

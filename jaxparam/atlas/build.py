@@ -1,0 +1,150 @@
+""":func:`atlas`: charts, one batched flattening, splits of failing charts, packing."""
+from __future__ import annotations
+
+import time
+
+import jax
+import numpy as np
+
+from .. import energies as en_mod
+from ..errors import MeshError, SolverError
+from ..mesh import TriMesh
+from . import charts as ch
+from . import flatten as fl
+from .pack import pack_charts
+from .result import Atlas, atlas_stats
+
+__all__ = ["atlas"]
+
+
+def _flatten_subset(V, F, chart, faces_idx, en, weights, solver, max_iters):
+    """Flatten the charts of the faces ``faces_idx``: per-corner UVs ``(k, 3, 2)`` and the
+    per-chart quality (indexed by the subset's chart order)."""
+    labels, sub_chart = np.unique(chart[faces_idx], return_inverse=True)
+    cm = fl.chart_mesh(V, F[faces_idx], sub_chart)
+    uv0 = fl.convex_start(cm, weights=weights)
+    uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters)
+    q = fl.chart_quality(cm, uv)
+    return uv[cm.mesh.faces], labels, q
+
+
+def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 1024,
+          margin_texels: int = 2, cone: float = 88.0, max_aspect: float = 8.0,
+          weights: str = "shape_preserving", solver="newton", max_iters: int = 200,
+          max_splits: int = 12) -> Atlas:
+    """A UV atlas of any manifold mesh: closed or open, any genus, several components.
+
+    **Arguments:**
+
+    - ``mesh``: a :class:`~jaxparam.TriMesh` with concrete vertices.
+    - ``energy``: the distortion each chart's map minimizes (a name or ``jp.energy(f)``).
+    - ``texture_size``: texels a side of the texture the atlas is packed for;
+      ``margin_texels``: the least gap between two charts, in texels.
+    - ``cone``: the largest angle (degrees) between a face normal and its chart's mean
+      normal while charts grow and merge.
+    - ``max_aspect``: a chart whose map has a triangle with ``s1/s2`` above this, or whose
+      boundary crosses itself, is split in two and flattened again (at most ``max_splits``
+      rounds).
+    - ``weights``, ``solver``, ``max_iters``: the convex-combination start's weights and
+      the minimization's solver and iteration cap.
+
+    **Returns:** an :class:`~jaxparam.atlas.Atlas` (``uv (n_uv, 2)``, ``uv_faces (m, 3)``,
+    ``chart (m,)``, ``seams``, ``stats``).  The mesh's vertices are never duplicated or
+    reordered: seams live in ``uv_faces`` only.
+
+    Each chart is a topological disk, mapped by a convex-combination start and a flip-free,
+    free-boundary minimization (all charts in one problem), then turned by a proper
+    rotation (never mirrored) and packed into ``[0, 1]^2``.
+
+    *Differentiability:* the charts and the packing are discrete choices and carry no
+    gradient; the packed UVs for new vertex positions with the layout held fixed
+    come from :func:`jaxparam.atlas.atlas_uv` (``jp.atlas_uv``) (implicit gradients through each chart's
+    minimization).
+
+    Raises :class:`~jaxparam.MeshError` for traced vertices or bad arguments (a
+    non-manifold mesh is refused when the :class:`TriMesh` is made), and
+    :class:`~jaxparam.SolverError` (stage ``"atlas"``) when a chart still fails after the
+    splits.
+
+    Example::
+
+        a = jp.atlas(jp.load("bunny.off"))
+        jp.save("bunny_atlas.obj", mesh, a.uv, uv_faces=a.uv_faces)
+    """
+    if isinstance(mesh.vertices, jax.core.Tracer):
+        raise MeshError("atlas: the vertices are JAX tracers; the charts and the packing are "
+                        "discrete choices made on concrete positions. Build the atlas from concrete "
+                        "vertices, then differentiate jp.atlas_uv(vertices, atlas).")
+    if int(texture_size) < 8:
+        raise MeshError(f"atlas: texture_size must be at least 8 texels, got {texture_size}.")
+    if int(margin_texels) < 0:
+        raise MeshError(f"atlas: margin_texels must be >= 0, got {margin_texels}.")
+    if not 0 < cone < 180:
+        raise MeshError(f"atlas: cone must be an angle in (0, 180) degrees, got {cone}.")
+    en = en_mod.get(energy)
+    t0 = time.perf_counter()
+    seconds = {}
+    V = np.asarray(mesh.vertices, np.float64)
+    t = mesh.topology
+    F = t.faces
+    chart = ch.segment(mesh, cone=cone)
+    seconds["charts"] = time.perf_counter() - t0
+    adj_csr = ch.face_csr(t)
+    corner_uv = np.zeros((F.shape[0], 3, 2))
+    todo = np.arange(F.shape[0])
+    splits = 0
+    overlaps = 0
+    t1 = time.perf_counter()
+    for round_ in range(max_splits + 1):
+        cuv, labels, q = _flatten_subset(V, F, chart, todo, en, weights, solver, max_iters)
+        corner_uv[todo] = cuv
+        bad = (q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > max_aspect)
+        if not bad.any():
+            break
+        if round_ == max_splits:
+            overlaps = int(q["overlaps"].sum())
+            if q["flips"].sum() or overlaps:
+                raise SolverError(
+                    f"atlas: {int(bad.sum())} charts still fold over after {max_splits} rounds of "
+                    "splits; raise max_splits or lower cone.", stage="atlas")
+            break
+        nxt = int(chart.max()) + 1
+        redo = []
+        for c in labels[bad]:
+            pieces = ch.split_chart(np.flatnonzero(chart == c), adj_csr, merge_small=True)
+            for k, piece in enumerate(pieces):
+                if k:
+                    chart[piece] = nxt
+                    nxt += 1
+            redo.append(np.flatnonzero(chart == c))
+            redo.extend(pieces[1:])
+        splits += int(bad.sum())
+        chart = ch.relabel(chart)
+        chart = ch.make_disks(t, chart, adj_csr)
+        # redo every chart that now holds a face of a split chart
+        touched = np.unique(chart[np.concatenate(redo)])
+        todo = np.flatnonzero(np.isin(chart, touched))
+    seconds["flatten"] = time.perf_counter() - t1
+    # one UV vertex per (chart, vertex)
+    n = t.n_vertices
+    key = np.repeat(chart, 3) * np.int64(n) + F.reshape(-1)
+    uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    uv_faces = inv.reshape(-1, 3).astype(np.int64)
+    vertex = uniq % n
+    uv_chart = uniq // n
+    chart_uv = corner_uv.reshape(-1, 2)[first]
+    t2 = time.perf_counter()
+    T = chart_uv[uv_faces]
+    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+    a_uv = 0.5 * float(np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
+    packing = pack_charts(chart_uv, uv_faces, chart, uv_chart, a_uv, texture_size=int(texture_size),
+                          margin_texels=int(margin_texels))
+    uv = np.clip(packing.apply(chart_uv, uv_chart), 0.0, 1.0)    # rounding at the borders
+    seconds["pack"] = time.perf_counter() - t2
+    seconds["total"] = time.perf_counter() - t0
+    seam_ids = ch.chart_edges(t, chart)
+    ef = t.edge_faces[seam_ids]
+    seams = t.edges[seam_ids[(ef[:, 0] >= 0) & (ef[:, 1] >= 0)]]
+    stats = atlas_stats(V, F, uv, uv_faces, chart, seams, overlaps, splits, seconds)
+    return Atlas(uv=uv, uv_faces=uv_faces, vertex=vertex, uv_chart=uv_chart, chart=chart,
+                 seams=seams, chart_uv=chart_uv, packing=packing, energy=en, stats=stats)

@@ -1,0 +1,372 @@
+"""Cutting a surface into charts: topological disks whose normals stay within a cone.
+
+All numpy (topology, computed once from concrete positions); the charts are a discrete
+choice that no gradient goes through.
+
+The route (chosen by measurement, see ``docs/design.md``, issue 18):
+
+1. *Greedy cone growth.*  Charts are grown one after another from a seed face, in
+   breadth-first rounds over the face adjacency; a face joins when its normal is within
+   ``cone`` degrees of the chart's area-weighted mean normal.  The next seed is an
+   unassigned face next to the charts grown so far, so the charts tile the surface
+   front by front.
+2. *Merging.*  Neighbouring charts are merged, smallest first, while the union stays a
+   disk and within the cone (measured on the union's mean normal).
+3. *Disks.*  Every chart is checked for disk topology (one face-connected piece, Euler
+   characteristic 1, every chart-boundary vertex on exactly two chart-boundary edges);
+   a chart that is not a disk is split in two along a breadth-first level set and the
+   pieces are checked again.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import TopologyError
+
+__all__ = ["face_adjacency", "face_normals", "grow_charts", "merge_charts", "make_disks",
+           "disk_flags", "split_chart", "relabel", "segment", "chart_edges", "faces_are_disk", "face_csr", "face_neighbours", "smooth_charts"]
+
+
+def face_adjacency(topology) -> np.ndarray:
+    """``(2, k) int``: the pairs of faces sharing an interior edge (each pair once)."""
+    ef = topology.edge_faces
+    inner = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
+    return ef[inner].T.copy()
+
+
+def face_normals(V: np.ndarray, F: np.ndarray):
+    """``(normals (m, 3) unit, areas (m,))`` of the 3D triangles."""
+    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    a2 = np.linalg.norm(c, axis=1)
+    return c / np.maximum(a2, 1e-300)[:, None], 0.5 * a2
+
+
+def face_csr(topology) -> sp.csr_matrix:
+    """The faces' adjacency (across interior edges) as a symmetric ``(m, m)`` CSR matrix."""
+    return _csr(face_adjacency(topology), topology.n_faces)
+
+
+def _csr(adj: np.ndarray, m: int) -> sp.csr_matrix:
+    i, j = adj
+    return sp.csr_matrix((np.ones(2 * i.size, np.int8), (np.r_[i, j], np.r_[j, i])), shape=(m, m))
+
+
+def grow_charts(normals, areas, adj, *, cone: float) -> np.ndarray:
+    """Greedy cone growth (step 1 of the module docstring).
+
+    **Arguments:** ``normals (m, 3)``, ``areas (m,)``, ``adj (2, k)`` face pairs;
+    ``cone``: the largest angle, in degrees, between a face normal and its chart's mean
+    normal.  **Returns:** ``chart (m,) int``, labels ``0..c-1``.
+    """
+    m = normals.shape[0]
+    A = _csr(adj, m)
+    chart = np.full(m, -1, np.int64)
+    cos_t = np.cos(np.radians(cone))
+    frontier_pool = np.zeros(m, bool)
+    c = 0
+    start = 0
+    while True:
+        pool = np.flatnonzero(frontier_pool & (chart < 0))
+        if pool.size:
+            seed = int(pool[0])
+        else:
+            rest = np.flatnonzero(chart[start:] < 0)
+            if rest.size == 0:
+                break
+            seed = start + int(rest[0])
+            start = seed
+        chart[seed] = c
+        N = normals[seed] * areas[seed]
+        new = np.array([seed])
+        members = [new]
+        while new.size:
+            cand = A[new].indices
+            cand = np.unique(cand[chart[cand] < 0])
+            if cand.size == 0:
+                break
+            n_hat = N / max(np.linalg.norm(N), 1e-300)
+            ok = cand[normals[cand] @ n_hat >= cos_t]
+            frontier_pool[cand] = True
+            chart[ok] = c
+            N = N + (normals[ok] * areas[ok, None]).sum(0)
+            members.append(ok)
+            new = ok
+        c += 1
+    return chart
+
+
+def relabel(chart: np.ndarray) -> np.ndarray:
+    """Labels renumbered ``0..c-1`` in order of each chart's first face."""
+    _, first, inv = np.unique(chart, return_index=True, return_inverse=True)
+    order = np.argsort(np.argsort(first))
+    return order[inv].astype(np.int64)
+
+
+def chart_edges(topology, chart: np.ndarray) -> np.ndarray:
+    """``(s,) int``: the edges (indices into ``topology.edges``) that are seams (their two
+    faces lie in different charts) or mesh boundary."""
+    ef = topology.edge_faces
+    cut = (ef[:, 0] < 0) | (ef[:, 1] < 0)
+    inner = ~cut
+    cut[inner] = chart[ef[inner, 0]] != chart[ef[inner, 1]]
+    return np.flatnonzero(cut)
+
+
+def disk_flags(topology, chart: np.ndarray) -> np.ndarray:
+    """``(c,) bool``: which charts are topological disks (one face-connected piece, Euler
+    characteristic ``V - E + F = 1``, each vertex on 0 or 2 chart-boundary edges)."""
+    c = int(chart.max()) + 1
+    F = topology.faces
+    m = F.shape[0]
+    ef = topology.edge_faces
+    E = topology.edges
+    # faces per chart
+    nF = np.bincount(chart, minlength=c)
+    # vertices per chart: unique (chart, vertex) pairs
+    cv = np.unique(np.repeat(chart, 3) * np.int64(topology.n_vertices) + F.reshape(-1))
+    nV = np.bincount(cv // topology.n_vertices, minlength=c)
+    # edges per chart: an interior edge inside a chart counts once, a seam once per side
+    e_side = np.r_[ef[:, 0], ef[:, 1]]
+    e_id = np.r_[np.arange(len(E)), np.arange(len(E))]
+    keep = e_side >= 0
+    ce = np.unique(chart[e_side[keep]] * np.int64(len(E)) + e_id[keep])
+    nE = np.bincount(ce // len(E), minlength=c)
+    euler_ok = (nV - nE + nF) == 1
+    # chart-boundary edges per (chart, vertex)
+    both = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
+    same = np.zeros(len(E), bool)
+    same[both] = chart[ef[both, 0]] == chart[ef[both, 1]]
+    bsides = keep & ~np.r_[same, same]
+    bc = chart[e_side[bsides]]
+    be = e_id[bsides]
+    key = np.r_[bc * np.int64(topology.n_vertices) + E[be, 0], bc * np.int64(topology.n_vertices) + E[be, 1]]
+    uk, cnt = np.unique(key, return_counts=True)
+    bad_keys = uk[cnt != 2]
+    pinch = np.zeros(c, bool)
+    pinch[np.unique(bad_keys // topology.n_vertices)] = True
+    has_boundary = np.zeros(c, bool)
+    has_boundary[np.unique(bc)] = True
+    # connectivity: components of the within-chart face graph
+    ia, ib = ef[both & same, 0], ef[both & same, 1]
+    from scipy.sparse.csgraph import connected_components
+
+    G = sp.csr_matrix((np.ones(ia.size, np.int8), (ia, ib)), shape=(m, m))
+    _, comp = connected_components(G, directed=False)
+    pieces = np.bincount(np.unique(chart * np.int64(m) + comp) // m, minlength=c)
+    return euler_ok & ~pinch & has_boundary & (pieces == 1)
+
+
+def split_chart(faces_of: np.ndarray, adj_csr: sp.csr_matrix, *, merge_small: bool = False) -> list:
+    """Split one chart (its face indices) in two along a breadth-first level set from a
+    far face (two sweeps); each half is then split into its face-connected pieces.
+    **Returns:** a list of face-index arrays."""
+    from scipy.sparse.csgraph import connected_components, shortest_path
+
+    sub = adj_csr[faces_of][:, faces_of]
+    d0 = shortest_path(sub, unweighted=True, indices=0, directed=False)
+    d0[~np.isfinite(d0)] = -1
+    far = int(np.argmax(d0))
+    d = shortest_path(sub, unweighted=True, indices=far, directed=False)
+    d[~np.isfinite(d)] = np.inf
+    finite = np.isfinite(d)
+    half = np.zeros(faces_of.size, bool)
+    if finite.all() and faces_of.size > 1:
+        med = np.median(d)
+        half = d <= med
+        if half.all():
+            half = d < med
+        if not half.any() or half.all():
+            half = np.arange(faces_of.size) < faces_of.size // 2
+    else:
+        half = finite
+    # the pieces: connected components of each half; with merge_small, a piece under a
+    # quarter of the chart joins the largest piece it touches (two charts, not a handful)
+    label = np.full(faces_of.size, -1, np.int64)
+    nxt = 0
+    for part in (half, ~half):
+        idx = np.flatnonzero(part)
+        if idx.size == 0:
+            continue
+        n, lab = connected_components(sub[idx][:, idx], directed=False)
+        label[idx] = lab + nxt
+        nxt += n
+    size = np.bincount(label, minlength=nxt)
+    coo = sub.tocoo()
+    for p in np.argsort(size):
+        if (not merge_small or size[p] == 0 or size[p] >= 0.25 * faces_of.size
+                or np.count_nonzero(size) <= 2):
+            continue
+        mine = label[coo.row] == p
+        nb = np.unique(label[coo.col[mine]])
+        nb = nb[nb != p]
+        if nb.size == 0:
+            continue
+        q = nb[np.argmax(size[nb])]
+        label[label == p] = q
+        size[q] += size[p]
+        size[p] = 0
+    return [faces_of[label == p] for p in np.flatnonzero(size)]
+
+
+def make_disks(topology, chart: np.ndarray, adj_csr) -> np.ndarray:
+    """Split every chart that is not a disk until all are (step 3)."""
+    chart = relabel(chart)
+    for _ in range(64):
+        ok = disk_flags(topology, chart)
+        if ok.all():
+            return chart
+        nxt = int(chart.max()) + 1
+        for c in np.flatnonzero(~ok):
+            for k, piece in enumerate(split_chart(np.flatnonzero(chart == c), adj_csr)):
+                if k:
+                    chart[piece] = nxt
+                    nxt += 1
+        chart = relabel(chart)
+    raise TopologyError(f"atlas: {int((~ok).sum())} charts did not become disks after 64 rounds of "
+                        f"splits (first: chart {int(np.flatnonzero(~ok)[0])}); the mesh may have "
+                        "degenerate faces: check it with `jaxparam info`.")
+
+
+def faces_are_disk(F: np.ndarray) -> bool:
+    """Whether the faces ``F (k, 3)`` (a face-connected set) form a topological disk: Euler
+    characteristic 1 and every boundary vertex on exactly two boundary edges."""
+    e = np.sort(np.stack([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]], 1).reshape(-1, 2), axis=1)
+    ue, cnt = np.unique(e, axis=0, return_counts=True)
+    nV = np.unique(F).size
+    if nV - ue.shape[0] + F.shape[0] != 1:
+        return False
+    b = ue[cnt == 1]
+    if b.size == 0:
+        return False
+    _, deg = np.unique(b, return_counts=True)
+    return bool(np.all(deg == 2))
+
+
+def merge_charts(chart, normals, areas, adj, faces, *, cone: float) -> np.ndarray:
+    """Merge neighbouring charts, smallest first, into the neighbour of largest area whose
+    union is a disk within the cone (step 2).  Loops over charts, not faces."""
+    chart = relabel(chart)
+    cos_t = np.cos(np.radians(cone))
+    for _ in range(4):
+        c = int(chart.max()) + 1
+        order = np.argsort(chart, kind="stable")
+        bounds = np.searchsorted(chart[order], np.arange(c + 1))
+        members = {k: order[bounds[k]:bounds[k + 1]] for k in range(c)}
+        N = np.zeros((c, 3))
+        np.add.at(N, chart, normals * areas[:, None])
+        area_c = np.bincount(chart, weights=areas, minlength=c)
+        a, b = chart[adj[0]], chart[adj[1]]
+        cross = a != b
+        pair = np.unique(np.sort(np.stack([a[cross], b[cross]], 1), axis=1), axis=0)
+        nbrs = {k: set() for k in range(c)}
+        for p, q in pair:
+            nbrs[int(p)].add(int(q))
+            nbrs[int(q)].add(int(p))
+        merged_any = False
+        for s in np.argsort(area_c).tolist():
+            if s not in members:
+                continue
+            cands = sorted(nbrs[s], key=lambda q: -area_c[q])
+            for q in cands:
+                Nq = N[q] + N[s]
+                n_hat = Nq / max(np.linalg.norm(Nq), 1e-300)
+                fs = np.concatenate([members[s], members[q]])
+                if np.min(normals[fs] @ n_hat) < cos_t:
+                    continue
+                if not faces_are_disk(faces[fs]):
+                    continue
+                members[q] = fs
+                del members[s]
+                N[q] = Nq
+                area_c[q] += area_c[s]
+                for r in nbrs[s]:
+                    nbrs[r].discard(s)
+                    if r != q:
+                        nbrs[r].add(q)
+                        nbrs[q].add(r)
+                nbrs[q].discard(s)
+                nbrs[q].discard(q)
+                del nbrs[s]
+                merged_any = True
+                break
+        for k, fs in members.items():
+            chart[fs] = k
+        chart = relabel(chart)
+        if not merged_any:
+            break
+    return chart
+
+
+def face_neighbours(topology) -> np.ndarray:
+    """``(m, 3) int``: the face across each edge of each face (``-1`` across the boundary),
+    in no particular edge order."""
+    ef = topology.edge_faces
+    inner = (ef[:, 0] >= 0) & (ef[:, 1] >= 0)
+    a, b = ef[inner, 0], ef[inner, 1]
+    src = np.r_[a, b]
+    dst = np.r_[b, a]
+    order = np.argsort(src, kind="stable")
+    src, dst = src[order], dst[order]
+    start = np.searchsorted(src, np.arange(topology.n_faces))
+    k = np.arange(src.size) - start[src]
+    out = np.full((topology.n_faces, 3), -1, np.int64)
+    out[src, k] = dst
+    return out
+
+
+def smooth_charts(chart: np.ndarray, nbr: np.ndarray, *, rounds: int = 6) -> np.ndarray:
+    """Move faces that stick out of their chart (at most one neighbour in it, two in one
+    other chart) into that other chart; ``rounds`` passes, all faces at once (a
+    majority filter along the seams: shorter, straighter seams that pack better)."""
+    chart = chart.copy()
+    for _ in range(rounds):
+        nc = np.where(nbr >= 0, chart[np.maximum(nbr, 0)], -1)         # (m, 3)
+        own = (nc == chart[:, None]).sum(1)
+        ab = (nc[:, 0] == nc[:, 1]) & (nc[:, 0] >= 0)
+        ac = (nc[:, 0] == nc[:, 2]) & (nc[:, 0] >= 0)
+        bc = (nc[:, 1] == nc[:, 2]) & (nc[:, 1] >= 0)
+        other = np.where(ab | ac, nc[:, 0], np.where(bc, nc[:, 1], -1))
+        move = (own <= 1) & (other >= 0) & (other != chart)
+        # a face and its neighbour must not swap into each other's charts in one pass
+        move &= np.arange(chart.size) % 2 == _ % 2
+        if not move.any():
+            continue
+        chart[move] = other[move]
+    return chart
+
+
+def keep_disks(topology, before: np.ndarray, after: np.ndarray, *, rounds: int = 8) -> np.ndarray:
+    """``after`` with the face moves undone that touch a chart which is a disk in ``before``
+    (same labels) but not in ``after``."""
+    after = after.copy()
+    ok_before = disk_flags(topology, before)
+    for _ in range(rounds):
+        ok = np.zeros(ok_before.size, bool)
+        flags = disk_flags(topology, after)               # empty labels come out False
+        ok[: flags.size] = flags
+        bad = ~ok & ok_before
+        moved = after != before
+        undo = moved & (bad[after] | bad[before])
+        if not undo.any():
+            break
+        after[undo] = before[undo]
+    return after
+
+
+def segment(mesh, *, cone: float = 60.0, merge_cone: float | None = None) -> np.ndarray:
+    """Charts of a mesh: ``chart (m,) int`` labels ``0..c-1``, every chart a disk.
+
+    **Arguments:** ``mesh`` (concrete vertices); ``cone`` in degrees (grow step);
+    ``merge_cone`` (merge step; default ``cone``).
+    """
+    t = mesh.topology
+    V = np.asarray(mesh.vertices, np.float64)
+    normals, areas = face_normals(V, t.faces)
+    adj = face_adjacency(t)
+    chart = grow_charts(normals, areas, adj, cone=cone)
+    adj_csr = _csr(adj, t.n_faces)
+    chart = make_disks(t, chart, adj_csr)
+    chart = merge_charts(chart, normals, areas, adj, t.faces, cone=merge_cone or cone)
+    chart = keep_disks(t, chart, smooth_charts(chart, face_neighbours(t)))
+    return make_disks(t, chart, adj_csr)

@@ -1,0 +1,255 @@
+"""jp.atlas.atlas (issue 18): disk charts, flip-free chart maps, packing into [0, 1]^2.
+
+The checks of a finished atlas do not trust the packer: overlaps are found by a
+separating-axis test on every pair of packed UV triangles, flips by signed areas,
+disks by jaxparam.topology on each chart's own faces.
+"""
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from jaxparam import topology as topo
+from jaxparam.atlas import atlas, atlas_uv, chart_pieces, pack
+from jaxparam.atlas import charts as ch
+from conftest import data_path
+
+
+# ---------------------------------------------------------------- generators
+
+def two_components():
+    """An icosphere and a torus beside it: one mesh, two connected components."""
+    s, t = jp.shapes.sphere(1), jp.shapes.torus(12, 6)
+    V = np.concatenate([np.asarray(s.vertices), np.asarray(t.vertices) + [3.0, 0, 0]])
+    F = np.concatenate([s.faces, t.faces + s.n_vertices])
+    return jp.TriMesh(V, F)
+
+
+def disk_with_holes(n: int = 16):
+    """A wavy square grid with three round holes cut out (four boundary loops)."""
+    g = jp.shapes.plane_grid(n, n)
+    V = np.asarray(g.vertices).copy()
+    V[:, 2] = 0.15 * np.sin(3 * V[:, 0]) * np.cos(2 * V[:, 1])
+    C = V[g.faces].mean(1)[:, :2]
+    keep = np.ones(g.n_faces, bool)
+    for c in ([0.27, 0.3], [0.7, 0.35], [0.5, 0.72]):
+        keep &= np.linalg.norm(C - c, axis=1) > 0.11
+    F = g.faces[keep]
+    used = np.unique(F)
+    new = np.full(V.shape[0], -1)
+    new[used] = np.arange(used.size)
+    return jp.TriMesh(V[used], new[F])
+
+
+# ---------------------------------------------------------------- independent checks
+
+def overlapping_pairs(T: np.ndarray, eps: float = 1e-12) -> int:
+    """How many pairs of triangles ``T (m, 3, 2)`` overlap with positive area (no
+    separating axis among their six edge normals, touching allowed)."""
+    m = T.shape[0]
+    i, j = np.triu_indices(m, 1)
+    A, B = T[i], T[j]
+    sep = np.zeros(i.size, bool)
+    for P in (A, B):
+        for k in range(3):
+            d = P[:, (k + 1) % 3] - P[:, k]
+            n = np.stack([-d[:, 1], d[:, 0]], -1)
+            pa = np.einsum("ki,kvi->kv", n, A)
+            pb = np.einsum("ki,kvi->kv", n, B)
+            scale = np.linalg.norm(n, axis=1) * 1e-9 + eps
+            sep |= (pa.max(1) <= pb.min(1) + scale) | (pb.max(1) <= pa.min(1) + scale)
+    return int(np.sum(~sep))
+
+
+def check_atlas(mesh, a, *, min_coverage: float):
+    F = mesh.faces
+    # vertex order kept: every UV corner belongs to the face's own vertex
+    assert np.array_equal(a.vertex[a.uv_faces], F)
+    assert a.uv_faces.shape == F.shape and a.chart.shape == (mesh.n_faces,)
+    # every face in exactly one chart, charts numbered 0..c-1, none empty
+    assert np.array_equal(np.unique(a.chart), np.arange(a.n_charts))
+    # a UV vertex belongs to one chart only (seams split UVs, not 3D vertices)
+    assert np.all(a.uv_chart[a.uv_faces] == a.chart[:, None])
+    T = a.uv[a.uv_faces]
+    assert T.min() >= 0.0 and T.max() <= 1.0
+    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+    area = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    assert np.all(area > 0), "flipped or degenerate UV triangle"
+    # no chart mirrored: each chart's total signed area is positive
+    assert np.all(np.bincount(a.chart, weights=area) > 0)
+    for c in range(a.n_charts):
+        fk = np.flatnonzero(a.chart == c)
+        t = topo.build(a.uv_faces[fk])
+        sub = topo.build(F[fk])
+        assert sub.n_components == 1 and len(sub.boundary_loops) == 1 and sub.genus == 0, c
+        assert sub.euler == 1
+        assert t.is_disk
+    assert area.sum() >= min_coverage
+    assert a.stats.coverage == pytest.approx(area.sum())
+    assert a.stats.flips == 0 and a.stats.mirrored == 0
+    if F.shape[0] <= 700:
+        assert overlapping_pairs(T) == 0
+
+
+# ---------------------------------------------------------------- packer units (no JAX)
+
+def test_rasterize_is_conservative_and_tight():
+    rng = np.random.default_rng(0)
+    # a random convex polygon, in cell units
+    ang = np.sort(rng.uniform(0, 2 * np.pi, 9))
+    P = np.stack([10 + 7 * np.cos(ang), 9 + 6 * np.sin(ang)], 1)
+    S = np.stack([P, np.roll(P, -1, 0)], 1)
+    M = pack.rasterize(S, (20, 20))
+    # brute force: a cell meets the polygon iff some point of a fine sample of the cell
+    # lies inside (convex: all cross products positive), or a polygon vertex is in it
+    s = (np.arange(41) / 40.0)
+    gx, gy = np.meshgrid(s, s)
+    pts = np.stack([gx.ravel(), gy.ravel()], 1)
+    want = np.zeros((20, 20), bool)
+    for j in range(20):
+        for i in range(20):
+            Q = pts + [i, j]
+            e = np.roll(P, -1, 0) - P
+            inside = np.all(e[:, 0] * (Q[:, None, 1] - P[:, 1]) - e[:, 1] * (Q[:, None, 0] - P[:, 0]) >= 0, axis=1)
+            want[j, i] = inside.any()
+    assert np.all(M[want]), "a cell that the polygon meets was missed"
+    extra = M & ~want
+    assert extra.sum() <= 0.1 * want.sum()   # only cells grazed between the samples
+
+
+def test_min_area_rotation_is_proper_and_tight():
+    rng = np.random.default_rng(1)
+    P = rng.uniform(-1, 1, (200, 2)) * [3.0, 0.5]
+    th = 0.6
+    R0 = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    Q = P @ R0.T
+    R = pack.min_area_rotation(Q)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    ext = np.ptp(Q @ R.T, axis=0)
+    assert ext[0] >= ext[1]
+    assert ext[0] * ext[1] <= np.ptp(P, axis=0).prod() * 1.0001
+
+
+def test_packing_keeps_margin_and_orientation():
+    # many small squares: placed without overlap, margin kept, rotation proper
+    k = 30
+    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    uv = np.concatenate([sq * (0.5 + 0.02 * c) for c in range(k)])
+    uf = np.concatenate([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * c for c in range(k)])
+    chart = np.repeat(np.arange(k), 2)
+    uvc = np.repeat(np.arange(k), 4)
+    area = float(np.sum([(0.5 + 0.02 * c) ** 2 for c in range(k)]))
+    P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=128, margin_texels=2)
+    out = P.apply(uv, uvc)
+    assert np.all(np.linalg.det(P.rotation) > 0.999)
+    assert out.min() >= 0 and out.max() <= 1
+    lo = np.array([out[uvc == c].min(0) for c in range(k)])
+    hi = np.array([out[uvc == c].max(0) for c in range(k)])
+    gap = np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None]).max(-1)
+    np.fill_diagonal(gap, np.inf)
+    assert gap.min() >= 2 / 128 - 1e-12
+    assert area * P.scale ** 2 >= 0.6
+
+
+# ---------------------------------------------------------------- atlases
+
+def test_sphere_atlas():
+    mesh = jp.shapes.sphere(1)
+    a = atlas(mesh)
+    check_atlas(mesh, a, min_coverage=0.4)
+    assert a.stats.sym_dirichlet < 4.4 and a.stats.max_aspect < 3
+    # the seams are the cut mesh edges between charts
+    e = np.sort(np.stack([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]], 1), -1)
+    cut = set(map(tuple, a.seams.tolist()))
+    for f in range(mesh.n_faces):
+        for k in range(3):
+            assert (tuple(e[f, k]) in cut) == (len({a.chart[g] for g in np.flatnonzero(
+                (e == e[f, k]).all(-1).any(-1))}) > 1)
+
+
+def test_charts_are_disks_on_a_torus_without_flattening():
+    mesh = jp.shapes.torus(24, 12)
+    c = ch.segment(mesh, cone=88.0)
+    assert ch.disk_flags(mesh.topology, c).all()
+    for k in range(int(c.max()) + 1):
+        t = topo.build(mesh.faces[c == k])
+        assert t.n_components == 1 and len(t.boundary_loops) == 1 and t.genus == 0
+
+
+def test_atlas_refuses_bad_input():
+    mesh = jp.shapes.sphere(1)
+    with pytest.raises(jp.MeshError, match="texture_size"):
+        atlas(mesh, texture_size=2)
+    with pytest.raises(jp.MeshError, match="cone"):
+        atlas(mesh, cone=200)
+    with pytest.raises(jp.MeshError, match="tracers"):
+        jax.grad(lambda X: jnp.sum(atlas(jp.TriMesh(X, mesh.faces)).uv))(jnp.asarray(mesh.vertices))
+    # a non-manifold mesh is refused by the library before any atlas work
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, -1, 0.5]], float)
+    with pytest.raises(jp.NonManifoldError):
+        atlas(jp.TriMesh(V, [[0, 1, 2], [0, 1, 3], [0, 1, 4]]))
+
+
+@pytest.mark.slow
+def test_cli_atlas_writes_obj_with_corner_uvs(tmp_path):
+    from jaxparam.cli import main
+
+    mesh = jp.shapes.sphere(1)
+    src = tmp_path / "sphere.obj"
+    jp.save(src, mesh)
+    out, rep = tmp_path / "out.obj", tmp_path / "r.json"
+    assert main(["atlas", str(src), "-o", str(out), "--report", str(rep)]) == 0
+    back = jp.load(out)
+    assert np.allclose(np.asarray(back.vertices), np.asarray(mesh.vertices))
+    assert np.array_equal(back.faces, mesh.faces)
+    r = json.loads(rep.read_text())
+    assert r["flips"] == 0 and r["charts"] >= 2 and r["mirrored"] == 0
+    text = out.read_text()
+    assert "vt " in text and any(l.startswith("f ") and "/" in l for l in text.splitlines())
+    assert back.uv_faces is not None and back.uv_faces.shape == mesh.faces.shape
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("make", [lambda: jp.shapes.torus(24, 12), two_components, disk_with_holes],
+                         ids=["torus", "two_components", "disk_with_three_holes"])
+def test_generated_atlases(make):
+    mesh = make()
+    a = atlas(mesh)
+    check_atlas(mesh, a, min_coverage=0.45)
+    assert a.stats.sym_dirichlet < 4.4
+
+
+@pytest.mark.slow
+def test_atlas_uv_gradient_matches_finite_differences():
+    mesh = jp.shapes.sphere(1)
+    a = atlas(mesh)
+    pieces = chart_pieces(a)
+    V0 = jnp.asarray(mesh.vertices)
+    U = atlas_uv(V0, a, pieces=pieces)
+    assert np.max(np.abs(np.asarray(U) - a.uv)) < 1e-5
+
+    def loss(X):       # invariant under a rigid motion of each chart: UV edge lengths
+        T = atlas_uv(X, a, pieces=pieces)[a.uv_faces]
+        return jnp.sum(jnp.sum((T[:, 1] - T[:, 0]) ** 2, -1) ** 2)
+
+    g = np.asarray(jax.grad(loss)(V0))
+    rng = np.random.default_rng(0)
+    D = rng.normal(size=V0.shape)
+    # central differences of re-solved minimizations: h large enough that the solver's
+    # stopping tolerance (~1e-9 in the UVs) stays far below h * gradient
+    h = 1e-3
+    fd = (loss(V0 + h * D) - loss(V0 - h * D)) / (2 * h)
+    assert float(np.sum(g * D)) == pytest.approx(float(fd), rel=1e-3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["bunny.off", "cow.off", "3holes.off", "decimated-knight.off",
+                                  "rocker-arm.obj"])
+def test_closed_data_meshes(name):
+    mesh = jp.load(data_path("meshes", name))
+    a = atlas(mesh)
+    check_atlas(mesh, a, min_coverage=0.5)
+    assert a.stats.max_aspect < 10
