@@ -145,6 +145,10 @@ def cmd_meshless(args) -> int:
     rec = reconstruct_surface(P, k=args.k, weights=canonical(args.weights),
                               boundary=canonical(args.boundary))
     clock("meshless_map_and_reconstruction")
+    if rec.outliers.size:
+        print(f"jaxparam meshless: warning: {rec.outliers.size} outliers left out of the mesh "
+              f"(points {', '.join(map(str, rec.outliers[:5].tolist()))}"
+              f"{', ...' if rec.outliers.size > 5 else ''})", file=sys.stderr)
     mesh, uv, used = rec.mesh, np.nan_to_num(np.asarray(rec.uv)), int(rec.points_used.size)
     rep = report_dict(mesh, rec.uv, seconds=clock, extra={
         "points": int(P.shape[0]), "points_used": used,

@@ -7,9 +7,12 @@ Pipeline (numpy for the combinatorics, JAX for what depends on coordinates):
    other).  Directed kNN graphs are often singular in practice: a cluster whose
    neighbours only point at each other never reaches the boundary (the
    solvability condition at the end of §8).
-2. Tangent planes by PCA of each neighbourhood; neighbours sorted by angle
-   around the point in that plane (a star-shaped fan, so the point lies in the
-   fan's kernel): :func:`point_graph`.
+2. Tangent planes by a weighted, once-reweighted PCA of each point's 24 nearest
+   neighbours (:func:`robust_frames`: holds under scanner noise); neighbours sorted by
+   angle around the point in that plane (a star-shaped fan, so the point lies in the
+   fan's kernel): :func:`point_graph`.  :func:`reconstruct_surface` first takes out the
+   outliers, points far above the plane of their neighbours or isolated beyond it
+   (:func:`find_outliers`), and can smooth the rest (``smooth="mls"``).
 3. :func:`detect_boundary`: a point is a boundary candidate when the largest
    angular gap between its 24 nearest neighbours, projected, exceeds ``gap``
    (default ``0.7 pi``).  The candidates are ordered into one closed polygon by the
@@ -35,17 +38,22 @@ parameter plane allows, peels off the hull triangles that bridge concave
 parts of the boundary and the ears over boundary points the detector missed;
 it returns a :class:`Reconstruction`.
 
-Modules: :mod:`.defaults` (the default settings), :mod:`.graph` (neighbourhoods, fans,
-Morton order), :mod:`.boundary` (detection), :mod:`.meshless` (checks and the map),
-:mod:`.triangulation` (Delaunay, flips, peeling, the largest disk), :mod:`.reconstruct`.
+Modules: :mod:`.defaults` (the default settings), :mod:`.graph` (neighbourhoods, robust
+frames, fans, Morton order), :mod:`.outliers` (outlier test, dropping points from neighbour
+lists), :mod:`.smoothing` (MLS / plane projection), :mod:`.boundary` (detection),
+:mod:`.meshless` (checks and the map), :mod:`.triangulation` (Delaunay, flips, peeling of
+bridges, lone points, the largest disk), :mod:`.reconstruct`.
 """
 from __future__ import annotations
 
 from ..io.points import load_points
 from .boundary import detect_boundary
-from .graph import PointGraph, knn_graph, point_graph
+from .graph import Frames, PointGraph, knn_graph, point_graph, robust_frames
 from .meshless import WEIGHTS, check_points, meshless_map
+from .outliers import find_outliers
 from .reconstruct import Reconstruction, reconstruct_surface
+from .smoothing import SMOOTHING, smooth_points
 
 __all__ = ["load_points", "check_points", "knn_graph", "PointGraph", "point_graph",
-           "detect_boundary", "meshless_map", "reconstruct_surface", "Reconstruction", "WEIGHTS"]
+           "detect_boundary", "meshless_map", "reconstruct_surface", "Reconstruction", "WEIGHTS",
+           "Frames", "robust_frames", "find_outliers", "SMOOTHING", "smooth_points"]

@@ -20,9 +20,11 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = GAP
     about the global normal).
 
     Candidates: points whose ``k_detect`` nearest neighbours, projected on the
-    tangent plane, leave an angular gap larger than ``gap`` (a larger
+    tangent plane (the robust frames of :func:`~jaxparam.points.graph.robust_frames` when
+    ``graph`` is given), leave an angular gap larger than ``gap`` (a larger
     neighbourhood than the map's: random samplings leave wide gaps in small
-    ones).  Candidates within three spacings of each other are linked; the
+    ones).  Candidates within three local spacings of each other (the larger of the
+    two points' mean neighbour distances) are linked; the
     linked group with the longest spanning tree is kept (stray interior
     candidates drop out) and ordered along the longest path of that tree.
     ``graph`` (from :func:`~jaxparam.points.point_graph` with the same ``k_detect``)
@@ -42,10 +44,12 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = GAP
     Q = P[cand]
     kk = min(8, cand.size - 1)
     dist, idx = cKDTree(Q).query(Q, kk + 1)
-    link = 3.0 * np.median(det_spacing[cand])
+    # Linked within three local spacings (the larger of the pair's): the threshold follows
+    # the density, so an unevenly sampled boundary stays one chain.
+    sp_c = det_spacing[cand]
     rows = np.repeat(np.arange(cand.size), kk)
     d = dist[:, 1:].reshape(-1)
-    ok = d <= link
+    ok = d <= 3.0 * np.maximum(sp_c[rows], sp_c[idx[:, 1:].reshape(-1)])
     W = sp.csr_matrix((d[ok] + 1e-300, (rows[ok], idx[:, 1:].reshape(-1)[ok])), shape=(cand.size,) * 2)
     W = W.maximum(W.T)
     nc, lab = connected_components(W, directed=False)

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["K", "K_DETECT", "GAP", "MAX_SLOPE", "BRIDGE_FACTOR", "FLIP_ROUNDS"]
+__all__ = ["K", "K_DETECT", "K_FRAME", "GAP", "MAX_SLOPE", "BRIDGE_FACTOR", "FLIP_ROUNDS",
+           "OUTLIER_SCALE", "OUTLIER_HEIGHT", "OUTLIER_ISOLATION",
+           "OUTLIER_ROUNDS"]
 
 #: Nearest neighbours per point in the map's fans (survey §8's ``k``).
 K = 10
@@ -16,6 +18,10 @@ K = 10
 #: Nearest neighbours whose angular gap decides whether a point is on the boundary: more than
 #: the map's ``K``, since random samplings leave wide gaps in small neighbourhoods.
 K_DETECT = 24
+
+#: Nearest neighbours of the weighted (robust) PCA that gives every point its tangent frame: more
+#: than the fans' ``K``, so that noise of a fraction of the spacing barely tilts the planes.
+K_FRAME = 24
 
 #: Angular gap (radians) above which a point is a boundary candidate: ``0.7 pi``.
 GAP = 0.7 * math.pi
@@ -30,3 +36,19 @@ BRIDGE_FACTOR = 3.0
 
 #: Most rounds of independent 3D Delaunay edge flips in the reconstruction.
 FLIP_ROUNDS = 100
+
+#: A point is an outlier when its height above the plane of its ``K_FRAME`` nearest neighbours
+#: exceeds this many robust noise scales of those neighbours (1.48 times their median height) ...
+OUTLIER_SCALE = 6.0
+
+#: ... and this fraction of their RMS distance from it within that plane (so that a clean,
+#: curved surface keeps every point) ...
+OUTLIER_HEIGHT = 0.5
+
+#: ... or when the mean distance to its 4 nearest neighbours exceeds this many times the median
+#: of the same over its neighbours (a point isolated off the surface, near its tangent plane).
+OUTLIER_ISOLATION = 2.5
+
+#: Rounds of the outlier test (each on the points the previous one kept: outliers close to
+#: each other inflate each other's neighbourhoods in the first).
+OUTLIER_ROUNDS = 2

@@ -10,15 +10,17 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..errors import PointCloudError, first_few
 from ..topology import permute_rows
-from .defaults import K, K_DETECT, MAX_SLOPE
+from .defaults import K, K_DETECT, K_FRAME, MAX_SLOPE
 
 __all__ = ["BLOCK", "nearest_neighbours", "knn_graph", "PointGraph", "point_graph", "point_graph_in_order",
            "tangent_frames", "drop_steep_pairs", "global_frame", "spatial_order", "morton_keys",
-           "angular_gaps", "knn_gaps"]
+           "angular_gaps", "knn_gaps", "robust_frames", "refresh_frames", "Frames",
+           "unreachable"]
 
 #: Points per block in the dense neighbourhood computations: the (block, k, 3) temporaries
 #: stay in cache instead of streaming (N, k, 3) arrays through memory (1M points: 4 s -> ~1 s).
@@ -130,21 +132,34 @@ def point_graph(points, k: int = K, *, radius: float | None = None, symmetric: b
 
 def point_graph_in_order(P: np.ndarray, k: int = K, *, radius: float | None = None,
                          symmetric: bool = True, k_detect: int = K_DETECT,
-                         max_slope: float = MAX_SLOPE, names: np.ndarray | None = None) -> PointGraph:
+                         max_slope: float = MAX_SLOPE, names: np.ndarray | None = None,
+                         nearest=None, frames: Frames | None = None,
+                         exempt: np.ndarray | None = None) -> PointGraph:
     """:func:`point_graph` computed in the points' own order, without reordering (fast when
     that order is spatially coherent, e.g. :func:`spatial_order`'s).
 
-    ``names[i]`` is point ``i``'s index in the user's order, for messages (default: ``i``).
+    ``names[i]`` is point ``i``'s index in the user's order, for messages (default: ``i``);
+    ``nearest = (dist (N, q), near (N, q))`` neighbours already queried (``q >= max(k,
+    k_detect, K_FRAME)``), ``frames`` their :func:`robust_frames`; ``exempt (N,) bool`` the
+    points whose steep pairs are kept (:func:`drop_steep_pairs`).  With ``k`` neighbours the
+    tangent frames are :func:`robust_frames` of the ``K_FRAME`` nearest; with ``radius``, the
+    PCA of the graph's neighbours.
     """
     N = P.shape[0]
     names = np.arange(N) if names is None else np.asarray(names)
     k_detect = min(k_detect, N - 1) if radius is None else 0
-    dist, near = nearest_neighbours(P, max(k, k_detect)) if radius is None else (None, None)
+    if radius is None and nearest is None:
+        nearest = nearest_neighbours(P, min(max(k, k_detect, K_FRAME), N - 1))
+    dist, near = nearest if radius is None else (None, None)
     indptr, indices = knn_graph(P, k, radius=radius, symmetric=symmetric, nearest=near)
     _check_degree(indptr, names, 2)
-    normal, e1, e2 = tangent_frames(P, indptr, indices)
+    if radius is None:
+        frames = robust_frames(P, near[:, :K_FRAME]) if frames is None else frames
+        normal, e1, e2 = frames.normal, frames.e1, frames.e2
+    else:
+        normal, e1, e2 = tangent_frames(P, indptr, indices)
     if max_slope < 1:
-        indptr, indices = drop_steep_pairs(P, indptr, indices, normal, max_slope)
+        indptr, indices = drop_steep_pairs(P, indptr, indices, normal, max_slope, exempt)
         _check_degree(indptr, names, 2)
     deg = np.diff(indptr)
     gap, spacing = np.empty(N), np.empty(N)
@@ -204,11 +219,130 @@ def tangent_frames(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray):
     return normal, e1, np.cross(normal, e1)
 
 
-def drop_steep_pairs(P, indptr, indices, normal, max_slope: float):
+@dataclass(frozen=True, eq=False)
+class Frames:
+    """Robust tangent frames of a point set (:func:`robust_frames`), ``N`` points.
+
+    - ``normal (N, 3)``, ``e1 (N, 3)``, ``e2 (N, 3)``: right-handed orthonormal frames, the
+      normal turned towards the global best-fit plane's normal;
+    - ``height (N,)``: each point's distance to the plane fitted to its neighbours (the point
+      itself left out: an outlier's is large; same units as the points);
+    - ``noise (N,)``: the robust scale of the neighbours' own distances to that plane
+      (1.4826 times their median: noise and curvature; units of the points);
+    - ``radius (N,)``: the RMS distance of the neighbours from the point within that plane
+      (the neighbourhood's size, from a point off the surface too).
+    """
+
+    normal: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    height: np.ndarray
+    noise: np.ndarray
+    radius: np.ndarray
+
+
+def refresh_frames(P: np.ndarray, near: np.ndarray, frames: Frames, rows: np.ndarray) -> Frames:
+    """``frames`` with the rows ``rows`` recomputed by :func:`robust_frames` from the
+    neighbours ``near (N, k)`` of ``P (N, 3)`` (after some neighbours were removed)."""
+    if rows.size == 0:
+        return frames
+    new = robust_frames(P, near[rows], centres=rows)
+    fields = {}
+    for name in ("normal", "e1", "e2", "height", "noise", "radius"):
+        a = getattr(frames, name).copy()
+        a[rows] = getattr(new, name)
+        fields[name] = a
+    return Frames(**fields)
+
+
+def robust_frames(P: np.ndarray, near: np.ndarray, *, rounds: int = 1,
+                  centres: np.ndarray | None = None) -> Frames:
+    """Tangent frames of points ``P (N, 3)`` from their nearest neighbours ``near (N, k)``
+    (self excluded): a weighted PCA, Gaussian in the distance (bandwidth: the mean squared
+    neighbour distance) and centred at the neighbours' weighted mean, not at the point (a
+    noisy point does not tilt its own plane), then ``rounds`` reweightings that turn down
+    neighbours far from the current plane (Cauchy weights at twice their robust scale).
+
+    On samples of a surface with noise of 0.1-0.3 % of the diagonal the plain PCA of the
+    fan's ~12 neighbours tilts normals by several degrees; 24 neighbours weighted this way
+    cut that error 2-3x.  ``e1`` is a fixed direction of the plane (from the normal alone),
+    since the fans and gaps only need some frame.  ``centres (M,)``: compute only the frames
+    of these points, ``near`` then being their ``(M, k)`` neighbours.
+    **Returns:** :class:`Frames` (of all points, or of ``centres``)."""
+    g = global_frame(P)[2]
+    C = P if centres is None else P[centres]
+    N = C.shape[0]
+    normal, e1 = np.empty((N, 3)), np.empty((N, 3))
+    height, noise, radius = np.empty(N), np.empty(N), np.empty(N)
+    for r0 in range(0, N, BLOCK):                  # blocks of rows: temporaries stay in cache
+        r1 = min(r0 + BLOCK, N)
+        D = P[near[r0:r1]] - C[r0:r1, None, :]                     # (block, k, 3)
+        r2 = np.einsum("bkd,bkd->bk", D, D)
+        w0 = np.exp(-r2 / (r2.mean(1, keepdims=True) + 1e-300))
+        w = w0
+        for it in range(rounds + 1):
+            W = w / w.sum(1, keepdims=True)
+            c = np.einsum("bk,bkd->bd", W, D)
+            X = D - c[:, None, :]
+            Xw = X * np.sqrt(W)[:, :, None]
+            n = smallest_eigenvector(np.matmul(Xw.transpose(0, 2, 1), Xw))
+            res = np.abs(np.matmul(X, n[:, :, None])[..., 0])
+            if it < rounds:       # the middle two of 24 (or the median): a partition, not a sort
+                k = res.shape[1]
+                mid = np.partition(res, [(k - 1) // 2, k // 2], axis=1)[:, [(k - 1) // 2, k // 2]]
+                s = 1.4826 * mid.mean(1) + 1e-12 * np.sqrt(r2.mean(1))
+                w = w0 / (1.0 + (res / (2.0 * s[:, None])) ** 2)
+        k = res.shape[1]
+        mid = np.partition(res, [(k - 1) // 2, k // 2], axis=1)[:, [(k - 1) // 2, k // 2]]
+        s = 1.4826 * mid.mean(1) + 1e-12 * np.sqrt(r2.mean(1))
+        n = n * np.where(n @ g < 0, -1.0, 1.0)[:, None]
+        normal[r0:r1] = n
+        ref = np.where(np.abs(n[:, :1]) < 0.6, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+        t = np.cross(n, ref)
+        e1[r0:r1] = t / np.linalg.norm(t, axis=1, keepdims=True)
+        height[r0:r1] = np.abs(np.einsum("bd,bd->b", c, n))
+        noise[r0:r1] = s
+        z = np.matmul(D, n[:, :, None])[..., 0]
+        radius[r0:r1] = np.sqrt(np.maximum((r2 - z * z).mean(1), 0.0))
+    return Frames(normal, e1, np.cross(normal, e1), height, noise, radius)
+
+
+def smallest_eigenvector(C: np.ndarray) -> np.ndarray:
+    """Unit eigenvectors ``(B, 3)`` of the smallest eigenvalues of symmetric ``C (B, 3, 3)``,
+    in closed form (the trigonometric eigenvalues, then the largest cross product of two rows
+    of ``C - lambda I``): 10x faster than ``np.linalg.eigh`` on many small matrices; sign
+    arbitrary.  Exact when the smallest eigenvalue is simple (a plane-like neighbourhood);
+    for a repeated one, some unit vector of its eigenspace's span is returned."""
+    a, b, c = C[:, 0, 0], C[:, 1, 1], C[:, 2, 2]
+    d, e, f = C[:, 0, 1], C[:, 1, 2], C[:, 0, 2]
+    q = (a + b + c) / 3
+    p1 = d * d + e * e + f * f
+    p = np.sqrt(((a - q) ** 2 + (b - q) ** 2 + (c - q) ** 2 + 2 * p1) / 6)
+    ps = np.where(p > 0, p, 1.0)
+    A, B_, Cc = (a - q) / ps, (b - q) / ps, (c - q) / ps
+    D_, E, F = d / ps, e / ps, f / ps
+    det = A * (B_ * Cc - E * E) - D_ * (D_ * Cc - E * F) + F * (D_ * E - B_ * F)
+    phi = np.arccos(np.clip(det / 2, -1.0, 1.0)) / 3
+    lam = q + 2 * p * np.cos(phi + 2 * np.pi / 3)
+    M = C - lam[:, None, None] * np.eye(3)
+    cands = np.stack([np.cross(M[:, 0], M[:, 1]), np.cross(M[:, 0], M[:, 2]),
+                      np.cross(M[:, 1], M[:, 2])], 1)                         # (B, 3, 3)
+    norms = np.einsum("bcd,bcd->bc", cands, cands)
+    best = np.argmax(norms, axis=1)
+    v = cands[np.arange(len(C)), best]
+    nv = np.sqrt(norms[np.arange(len(C)), best])
+    fallback = nv <= 1e-300                     # C = lambda I: any direction
+    v[fallback] = [0.0, 0.0, 1.0]
+    nv[fallback] = 1.0
+    return v / nv[:, None]
+
+
+def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.ndarray | None = None):
     """Remove the neighbour pairs ``v, w`` whose direction leaves either tangent plane by more
     than ``|n . (w - v)| / |w - v| > max_slope``: on a thin part of the surface (an ear)
     they join its two sides, and the map would fold that part onto itself.  Points that
-    would keep fewer than three neighbours keep all of theirs (pairs stay symmetric).
+    would keep fewer than three neighbours keep all of theirs (pairs stay symmetric), and so
+    do the points ``exempt (N,) bool`` (default: none).
 
     **Returns:** the pruned CSR ``(indptr, indices)``."""
     N = P.shape[0]
@@ -224,6 +358,8 @@ def drop_steep_pairs(P, indptr, indices, normal, max_slope: float):
         keep[lo:hi] = tilt <= max_slope * np.sqrt(np.einsum("ij,ij->i", d, d))
     rows = np.repeat(np.arange(N), deg)
     weak = np.add.reduceat(keep.astype(np.int64), indptr[:-1]) < 3
+    if exempt is not None:
+        weak = weak | exempt
     keep |= weak[rows] | weak[indices]
     ptr = np.zeros(N + 1, np.int64)
     np.cumsum(np.add.reduceat(keep.astype(np.int64), indptr[:-1]), out=ptr[1:])
@@ -287,3 +423,12 @@ def angular_gaps(P: np.ndarray, dist: np.ndarray, idx: np.ndarray, frame=None):
         inner = (ang[:, 1:] - ang[:, :-1]).max(axis=1)
         gap[b] = np.maximum(inner, ang[:, 0] + 2 * np.pi - ang[:, -1])
     return gap, dist.mean(1)
+
+
+def unreachable(graph: PointGraph, boundary: np.ndarray) -> np.ndarray:
+    """``(N,) bool``: the points in no component of the (symmetrized) neighbour graph that
+    holds a point of ``boundary`` (eq. (4) is singular for them)."""
+    N = graph.n_points
+    G = sp.csr_matrix((np.ones(graph.indices.size, np.int8), graph.indices, graph.indptr), shape=(N, N))
+    _, lab = connected_components(G, directed=True, connection="weak")
+    return ~np.isin(lab, np.unique(lab[boundary]))

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import jax
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .. import topology as topo
 from ..clock import StageClock
@@ -13,12 +14,16 @@ from ..errors import PointCloudError
 from ..memory import reuse_freed_memory
 from ..mesh import TriMesh
 from .boundary import detect_boundary
-from .defaults import BRIDGE_FACTOR, FLIP_ROUNDS, GAP, K, K_DETECT, MAX_SLOPE
-from .graph import point_graph_in_order, spatial_order
+from .defaults import (BRIDGE_FACTOR, FLIP_ROUNDS, GAP, K, K_DETECT, K_FRAME, MAX_SLOPE,
+                       OUTLIER_ROUNDS)
+from .graph import (Frames, nearest_neighbours, point_graph_in_order, refresh_frames, robust_frames,
+                    spatial_order, unreachable)
+from .outliers import drop_points, find_outliers
+from .smoothing import SMOOTHING, smooth_points
 from .meshless import (check_boundary_indices, check_map_options, check_points, map_points,
                        symmetric_solve)
 from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
-                            outside_bridges, peel_ears)
+                            lone_points, long_faces, outside_bridges, peel_ears)
 
 __all__ = ["Reconstruction", "reconstruct_surface"]
 
@@ -37,9 +42,13 @@ class Reconstruction:
     - ``boundary (b,) int``: the boundary polygon the map used (detected or given), as
       input indices in order (anticlockwise when detected);
     - ``points_used (u,) int``: the input points the faces reference, increasing;
+    - ``outliers (o,) int``: the input points found far from the surface their neighbours
+      define (:func:`~jaxparam.points.outliers.find_outliers`), increasing; left out of the
+      map and the faces (their ``uv`` is that of their nearest kept point), and the points
+      whose every Delaunay face bridges far beyond the spacing (they keep the map's ``uv``);
     - ``seconds``: wall-clock seconds per stage, ``{"neighbours", "boundary" (when
       detected), "weights_and_solve", "delaunay", "flips" (when ``flip_rounds``),
-      "peel_and_topology"}``.
+      "peel_and_topology"}`` ("neighbours" includes the outlier test and the smoothing).
 
     Example::
 
@@ -52,6 +61,7 @@ class Reconstruction:
     boundary: np.ndarray
     points_used: np.ndarray
     seconds: dict
+    outliers: np.ndarray
 
 
 def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving",
@@ -59,7 +69,8 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
                         boundary_indices=None, radius: float | None = None,
                         symmetric: bool = True, gap: float = GAP, merge_duplicates: bool = False,
                         max_slope: float = MAX_SLOPE, bridge_factor: float = BRIDGE_FACTOR,
-                        flip_rounds: int = FLIP_ROUNDS, **unknown) -> Reconstruction:
+                        flip_rounds: int = FLIP_ROUNDS, outliers: bool = True,
+                        smooth: str | None = None, **unknown) -> Reconstruction:
     """Triangulate unorganized points ``(N, 3)`` through their meshless parameterization (§8).
 
     The meshless map (:func:`~jaxparam.points.meshless_map`, whose options ``k``,
@@ -74,6 +85,13 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     the local point spacing (they bridge concave parts of the boundary) are peeled off,
     then the ears over boundary points the detection missed, and the largest manifold disk
     is kept.
+
+    Scans: points far from the plane of their ``K_FRAME`` nearest neighbours are outliers
+    (``outliers=True``): reported in ``rec.outliers``, left out of the mesh, the other points
+    keep their indices.  ``smooth`` moves the vertices onto a fitted surface to cut noise:
+    ``"mls"`` (a weighted quadratic height field over each point's robust tangent plane,
+    evaluated at the point) or ``"plane"`` (onto that plane); by default (``None``) the
+    mesh's vertices are the input points, in their order.
 
     **Returns:** a :class:`Reconstruction` (``rec.mesh``, ``rec.uv``, ``rec.boundary``,
     ``rec.points_used``, ``rec.seconds``).  Raises :class:`PointCloudError` for an option
@@ -93,15 +111,18 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
             "jp.meshless_map(points, graph=..., boundary_indices=...) or the reconstructed mesh's "
             "own maps (e.g. jp.convex_map(jp.TriMesh(P, rec.mesh.faces))) instead.")
     weights, boundary, spacing = check_map_options("reconstruct_surface", weights, boundary, spacing)
+    if smooth not in SMOOTHING:
+        raise PointCloudError(f"reconstruct_surface: smooth must be one of {SMOOTHING}, got {smooth!r}.")
     with reuse_freed_memory(np.shape(points)[0] if np.ndim(points) == 2 else 0):
         return _reconstruct(points, k=k, radius=radius, symmetric=symmetric, weights=weights,
                             boundary=boundary, spacing=spacing, gap=gap, user_bnd=boundary_indices,
                             merge=merge_duplicates, max_slope=max_slope,
-                            bridge_factor=bridge_factor, flip_rounds=flip_rounds)
+                            bridge_factor=bridge_factor, flip_rounds=flip_rounds,
+                            outliers=outliers, smooth=smooth)
 
 
 def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, gap, user_bnd, merge,
-                 max_slope, bridge_factor, flip_rounds) -> Reconstruction:
+                 max_slope, bridge_factor, flip_rounds, outliers, smooth) -> Reconstruction:
     clock = StageClock()
     P0, kept, index = check_points(points, k=k, merge_duplicates=merge, return_index=True)
     n_in = index.size
@@ -111,18 +132,55 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     # the result is renumbered to the input's order at the end.  ``kept[perm]`` names each
     # point here by its input index.
     perm = spatial_order(P0)
-    inv = np.empty_like(perm)
-    inv[perm] = np.arange(perm.size)
     P = P0[perm]
+    order = perm                       # the rows of P0 in the working order
+    user = None
+    if user_bnd is not None:
+        user = check_boundary_indices("reconstruct_surface", user_bnd, n_in, index if merged else None)
+    near = None
+    if radius is None:
+        kq = min(max(k, K_DETECT, K_FRAME) + 4, len(P) - 1)
+        dist, near = nearest_neighbours(P, kq)
+        frames = robust_frames(P, near[:, :K_FRAME])
+        protect = np.zeros(len(P0), bool)            # the user's boundary points stay
+        if user is not None:
+            protect[user] = True
+        # Two rounds: outliers close to each other hide each other in the first.
+        for _ in range(OUTLIER_ROUNDS if outliers else 0):
+            bad = find_outliers(P, frames, dist[:, :K_FRAME], near[:, :K_FRAME]) & ~protect[order]
+            if not bad.any():
+                break
+            keep_k = min(max(k, K_DETECT, K_FRAME), len(P) - 1 - int(bad.sum()))
+            sub, P, dist, near, changed = drop_points(P, dist, near, bad, keep_k)
+            order = order[sub]
+            # Only the points that lost a neighbour get new frames.
+            frames = refresh_frames(P, near[:, :K_FRAME], Frames(*(getattr(frames, f)[sub] for f in (
+                "normal", "e1", "e2", "height", "noise", "radius"))), changed)
+        if smooth is not None:
+            P = smooth_points(P, near[:, :K_FRAME], frames, smooth)
+            frames = robust_frames(P, near[:, :K_FRAME])
+    elif smooth is not None:
+        raise PointCloudError("reconstruct_surface: smooth needs k nearest neighbours, not radius.")
+    where = np.full(len(P0), -1, np.int64)            # P0 row -> working index (-1: outlier)
+    where[order] = np.arange(order.size)
     graph = point_graph_in_order(P, k, radius=radius, symmetric=symmetric, k_detect=K_DETECT,
-                                 max_slope=max_slope, names=kept[perm])
+                                 max_slope=max_slope, names=kept[order],
+                                 nearest=None if near is None else (dist, near),
+                                 frames=None if near is None else frames)
     clock("neighbours")
-    if user_bnd is None:
+    if user is None:
         bnd = detect_boundary(P, graph, gap=gap)
         clock("boundary")
     else:
-        bnd = inv[check_boundary_indices("reconstruct_surface", user_bnd, n_in,
-                                         index if merged else None)]
+        bnd = where[user]
+    cut_off = unreachable(graph, bnd)
+    if cut_off.any() and max_slope < 1:
+        # Clusters that dropping steep pairs cut off from the boundary (a few points at the
+        # tip of a thin part): they keep their steep pairs, so that eq. (4) stays solvable.
+        graph = point_graph_in_order(P, k, radius=radius, symmetric=symmetric, k_detect=K_DETECT,
+                                     max_slope=max_slope, names=kept[order],
+                                     nearest=None if near is None else (dist, near),
+                                     frames=None if near is None else frames, exempt=cut_off)
     U = np.asarray(map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
                               symmetric=symmetric_solve(weights, symmetric, radius)))
     clock("weights_and_solve")
@@ -132,22 +190,40 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     if flip_rounds:
         F = flip_towards_3d_delaunay(F, P, U, flip_rounds)
         clock("flips")
-    L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
-    local = graph.spacing[F].mean(1)
-    too_long = L.max(1) > bridge_factor * local
+    too_long = long_faces(F, P, graph.spacing, bridge_factor)
+    late = (lone_points(F, long_faces(F, P, graph.spacing, 2 * bridge_factor, np.min), len(P), bnd)
+            if outliers else np.zeros(0, np.int64))
+    if late.size:
+        # Points whose every face is longer than twice the bridge length (of the smallest
+        # vertex spacing): outliers the neighbourhood test missed, alone or in pairs.  Triangulate again without them (their UVs stay; they stay unused).
+        rest = np.setdiff1d(np.arange(len(P)), late)
+        F = rest[delaunay(U[rest])]
+        F = F[np.argsort(F.min(axis=1), kind="stable")]
+        if flip_rounds:
+            F = flip_towards_3d_delaunay(F, P, U, flip_rounds)
+        too_long = long_faces(F, P, graph.spacing, bridge_factor)
     # Peel in one pass: the too-long faces connected to the outside through too-long faces.
     keep = ~outside_bridges(F, too_long, len(P))
     F = peel_ears(F[keep], P, graph)
     F, topology = largest_manifold_disk(F, len(P))
-    if merged:                                           # onto all input points, copies unused
-        name = kept[perm]
+    name = kept[order]                                   # working index -> input index
+    dropped = np.flatnonzero(where < 0)                  # outliers, as rows of P0 (not mapped)
+    U0 = np.empty((len(P0), 2))
+    U0[order] = U
+    if dropped.size:                                     # an outlier gets its nearest kept point's UV
+        U0[dropped] = U[cKDTree(P).query(P0[dropped], 1, workers=-1)[1]]
+    if merged or dropped.size:                           # onto all input points, copies unused
         topology = topo.build(name[topology.faces], n_in, where="reconstruct_surface")
-        uv = U[inv][index]
     else:
         topology = topo.renumber(topology, perm)
-        uv = U[inv]
-    mesh = TriMesh(np.asarray(points, np.float64), None, topology, uv=uv, validate=False,
-                   name="reconstruction")
+    uv = U0[index] if merged else U0
+    V = np.array(points, np.float64)
+    if smooth is not None:                               # moved points (copies with their first)
+        V0 = P0.copy()
+        V0[order] = P
+        V = V0[index]
+    mesh = TriMesh(V, None, topology, uv=uv, validate=False, name="reconstruction")
     clock("peel_and_topology")
-    return Reconstruction(mesh=mesh, uv=uv, boundary=kept[perm[bnd]],
-                          points_used=np.flatnonzero(topology.referenced), seconds=clock.seconds)
+    return Reconstruction(mesh=mesh, uv=uv, boundary=name[bnd],
+                          points_used=np.flatnonzero(topology.referenced), seconds=clock.seconds,
+                          outliers=np.sort(np.concatenate([kept[dropped], name[late]])))

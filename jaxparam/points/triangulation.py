@@ -14,8 +14,8 @@ from ..topology import half_edge_twins
 from ..triangles import corner_angle, face_angles, orient
 from .graph import PointGraph
 
-__all__ = ["delaunay", "flip_towards_3d_delaunay", "outside_bridges", "peel_ears",
-           "largest_manifold_disk"]
+__all__ = ["delaunay", "flip_towards_3d_delaunay", "long_faces", "lone_points", "outside_bridges",
+           "peel_ears", "largest_manifold_disk"]
 
 
 def delaunay(U: np.ndarray) -> np.ndarray:
@@ -172,6 +172,27 @@ def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: flo
         ok = np.all(first[verts] == np.arange(ear.size)[:, None], axis=1)
         alive[h[ear[ok]] // 3] = False
     return F[alive]
+
+
+def long_faces(F: np.ndarray, P: np.ndarray, spacing: np.ndarray, factor: float,
+               reduce=np.median) -> np.ndarray:
+    """``(m,) bool``: the faces ``F (m, 3)`` whose longest 3D edge exceeds ``factor`` times the
+    ``reduce`` (median, or min) of the ``spacing (N,)`` of their three vertices (``P (N, 3)``;
+    not the mean, so that a vertex off the surface, whose own spacing is large, does not
+    excuse its faces)."""
+    L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    return L.max(1) > factor * reduce(spacing[F], axis=1)
+
+
+def lone_points(F: np.ndarray, long: np.ndarray, n: int, keep: np.ndarray) -> np.ndarray:
+    """The vertices (increasing, not in ``keep``) of the faces ``F (m, 3)`` over ``n`` vertices
+    all of whose faces are ``long (m,) bool``: points off the surface that every triangle to
+    them bridges."""
+    faces = np.bincount(F.reshape(-1), minlength=n)
+    longs = np.bincount(F[long].reshape(-1), minlength=n)
+    lone = (faces > 0) & (longs == faces)
+    lone[keep] = False
+    return np.flatnonzero(lone)
 
 
 def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:

@@ -1,0 +1,207 @@
+"""Scan-like point sets (survey §8, issue 14): noise, uneven density and outliers.
+
+Always-on tests sample the height field ``z = h(x, y)`` over the unit square (the vertical
+distance to it bounds the true distance from above); the slow ones sample shared disk meshes
+and score against them with libigl.
+"""
+import numpy as np
+import pytest
+
+import jaxparam as jp
+from jaxparam import points as PT
+from jaxparam.errors import PointCloudError
+from jaxparam.points.defaults import BRIDGE_FACTOR
+from jaxparam.points.graph import knn_graph, robust_frames, tangent_frames
+from conftest import data_path
+
+
+def height(x, y):
+    return 0.2 * np.sin(2 * np.pi * x) * np.cos(2 * np.pi * y) + 0.3 * x ** 2
+
+
+def true_normal(x, y):
+    hx = 0.4 * np.pi * np.cos(2 * np.pi * x) * np.cos(2 * np.pi * y) + 0.6 * x
+    hy = -0.4 * np.pi * np.sin(2 * np.pi * x) * np.sin(2 * np.pi * y)
+    n = np.column_stack([-hx, -hy, np.ones_like(x)])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def scan(n, *, noise=0.0, outliers=0.0, density=1.0, notch=False, seed=0):
+    """``n`` points of the height field: Gaussian noise of ``noise`` times the diagonal (RMS),
+    density rising ``density``-fold along x, a share ``outliers`` moved 3-10 % of the
+    diagonal up or down, ``notch``: the domain is a C (no points in x in [0.3, 0.7], y > 0.3).
+    **Returns:** ``(P (n, 3), outlier indices, diagonal)``."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((16 * n, 2))
+    xy = xy[rng.random(len(xy)) < (1 + (density - 1) * xy[:, 0]) / density]
+    if notch:
+        xy = xy[~((xy[:, 0] > 0.3) & (xy[:, 0] < 0.7) & (xy[:, 1] > 0.3))]
+    xy = xy[:n]
+    P = np.column_stack([xy, height(xy[:, 0], xy[:, 1])])
+    diag = float(np.linalg.norm(np.ptp(P, axis=0)))
+    P = P + rng.normal(0, noise * diag, P.shape)
+    out = np.sort(rng.choice(n, int(outliers * n), replace=False))
+    P[out, 2] += rng.choice([-1, 1], out.size) * rng.uniform(0.03, 0.1, out.size) * diag
+    return P, out, diag
+
+
+def face_samples(P, F):
+    """Centroids and edge midpoints of the faces ``F`` over ``P``."""
+    X = P[F]
+    return np.concatenate([X.mean(1), (X[:, 0] + X[:, 1]) / 2, (X[:, 1] + X[:, 2]) / 2,
+                           (X[:, 2] + X[:, 0]) / 2])
+
+
+def check_scan_result(rec, P, out, diag, *, tol=0.01):
+    """The issue's quality goal on a height-field scan: vertices are the input points, in
+    order; planted outliers out of the faces; >= 99 % of the others used; faces within
+    ``tol`` of the diagonal (vertical distance); one manifold disk; no flipped UV."""
+    F = np.asarray(rec.mesh.faces)
+    np.testing.assert_array_equal(np.asarray(rec.mesh.vertices), P)
+    inlier = np.ones(len(P), bool)
+    inlier[out] = False
+    used = np.zeros(len(P), bool)
+    used[rec.points_used] = True
+    assert used[inlier].mean() >= 0.99
+    S = face_samples(P, F)
+    assert np.abs(S[:, 2] - height(S[:, 0], S[:, 1])).max() <= tol * diag
+    assert rec.mesh.topology.is_disk and len(rec.mesh.topology.boundary_loops) == 1
+    assert jp.distortion(rec.mesh, rec.uv).flips == 0
+    assert np.all(np.isfinite(np.asarray(rec.uv)))
+
+
+def test_outliers_are_found_reported_and_left_out():
+    P, out, diag = scan(3000, noise=0.002, outliers=0.01, seed=1)
+    rec = jp.reconstruct_surface(P)
+    found = np.isin(out, rec.outliers)
+    assert found.mean() >= 0.9, f"{found.sum()} of {out.size} outliers found"
+    false = np.setdiff1d(rec.outliers, out)
+    assert false.size <= 0.005 * len(P)
+    assert np.all(np.diff(rec.outliers) > 0)
+    assert not np.isin(rec.outliers, rec.points_used).any()
+    check_scan_result(rec, P, out, diag)
+    # Turned off, the outliers are meshed and pull faces far off the surface.
+    rec0 = jp.reconstruct_surface(P, outliers=False)
+    assert rec0.outliers.size == 0
+    S = face_samples(P, np.asarray(rec0.mesh.faces))
+    assert np.abs(S[:, 2] - height(S[:, 0], S[:, 1])).max() > 0.02 * diag
+
+
+def test_noisy_uneven_scan_is_one_disk_near_the_surface():
+    P, out, diag = scan(3000, noise=0.002, density=8.0, seed=2)
+    rec = jp.reconstruct_surface(P)
+    check_scan_result(rec, P, out, diag)
+
+
+def test_no_bridging_triangles_over_a_notch_of_a_noisy_scan():
+    # A C-shaped domain: the parameter-plane Delaunay closes the notch with long triangles.
+    P, out, diag = scan(3000, noise=0.002, notch=True, seed=3)
+    rec = jp.reconstruct_surface(P)
+    check_scan_result(rec, P, out, diag)
+    F = np.asarray(rec.mesh.faces)
+    C = P[F].mean(1)
+    spacing = np.median(np.sort(np.linalg.norm(P[F] - P[F][:, [1, 2, 0]], axis=2), axis=1)[:, 0])
+    inside = (C[:, 0] > 0.3 + 2 * spacing) & (C[:, 0] < 0.7 - 2 * spacing) & (C[:, 1] > 0.3 + 2 * spacing)
+    assert not inside.any(), f"{inside.sum()} faces bridge the notch"
+    L = np.linalg.norm(P[F] - P[F][:, [1, 2, 0]], axis=2).max(1)
+    assert L.max() <= 2 * BRIDGE_FACTOR * np.median(L)
+
+
+def test_smoothing_cuts_the_noise_and_the_default_keeps_the_points():
+    P, out, diag = scan(3000, noise=0.002, seed=4)
+    err = lambda V: np.sqrt(np.mean((V[:, 2] - height(V[:, 0], V[:, 1])) ** 2))   # noqa: E731
+    rec = jp.reconstruct_surface(P)
+    np.testing.assert_array_equal(np.asarray(rec.mesh.vertices), P)
+    for how, factor in (("mls", 0.6), ("plane", 0.8)):
+        sm = jp.reconstruct_surface(P, smooth=how)
+        V = np.asarray(sm.mesh.vertices)
+        assert err(V) < factor * err(P), how
+        assert sm.mesh.topology.is_disk and jp.distortion(sm.mesh, sm.uv).flips == 0
+    with pytest.raises(PointCloudError, match="smooth must be one of"):
+        jp.reconstruct_surface(P, smooth="laplace")
+
+
+def test_robust_frames_tilt_less_than_the_fan_pca_under_noise():
+    P, _, diag = scan(4000, noise=0.003, seed=5)
+    n_true = true_normal(P[:, 0], P[:, 1])
+    near = PT.graph.nearest_neighbours(P, 24)[1]
+    robust = robust_frames(P, near).normal
+    plain = tangent_frames(P, *knn_graph(P, 10, nearest=near))[0]
+    ang = lambda N: np.degrees(np.arccos(np.minimum(np.abs(np.sum(N * n_true, 1)), 1)))   # noqa: E731
+    assert np.median(ang(robust)) < 0.7 * np.median(ang(plain))
+    assert np.all(robust[:, 2] > 0)                      # all turned the same way (upwards)
+
+
+def test_user_boundary_points_are_never_outliers():
+    P, out, diag = scan(2000, seed=6)
+    rec = jp.reconstruct_surface(P)
+    P2 = P.copy()
+    P2[rec.boundary[0], 2] += 0.05 * diag              # a boundary point lifted off the surface
+    auto = jp.reconstruct_surface(P2)
+    assert rec.boundary[0] in auto.outliers
+    given = jp.reconstruct_surface(P2, boundary_indices=rec.boundary)
+    assert rec.boundary[0] not in given.outliers
+    np.testing.assert_array_equal(given.boundary, rec.boundary)
+
+
+# --- shared meshes (slow): the issue's quality goal -----------------------------------------
+
+def mesh_scan(name, kind, n, seed=0):
+    """``n`` area-weighted samples of a shared mesh: ``noise2`` adds Gaussian noise of 0.2 %
+    of the diagonal, ``dens8`` makes the density rise eightfold along the longest axis."""
+    ext = {"camelhead": "off", "lilium": "obj", "snail": "obj", "bump-domain": "obj"}[name]
+    src = jp.load(data_path("meshes", f"{name}.{ext}"))
+    V, F = np.asarray(src.vertices), np.asarray(src.faces)
+    rng = np.random.default_rng(seed)
+    A = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    f = rng.choice(len(F), 8 * n, p=A / A.sum())
+    s, r = np.sqrt(rng.random(8 * n)), rng.random(8 * n)
+    P = np.einsum("nk,nkd->nd", np.stack([1 - s, s * (1 - r), s * r], 1), V[F[f]])
+    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    if kind == "dens8":
+        ax = int(np.argmax(np.ptp(V, axis=0)))
+        t = (P[:, ax] - V[:, ax].min()) / np.ptp(V[:, ax])
+        P = P[rng.random(len(P)) < (1 + 7 * t) / 8]
+    P = P[:n]
+    if kind == "noise2":
+        P = P + rng.normal(0, 0.002 * diag, P.shape)
+    return P, V, F, diag
+
+
+@pytest.mark.slow
+@pytest.mark.data
+@pytest.mark.peer
+@pytest.mark.parametrize("name", ["camelhead", "lilium", "snail", "bump-domain"])
+@pytest.mark.parametrize("kind", ["noise2", "dens8"])
+def test_shared_mesh_scans_meet_the_quality_goal(name, kind):
+    """50k samples: faces within 1 % of the diagonal of the source mesh; the source within 1 %
+    of the faces for 99.9 % of its area (the rest is the sparse boundary band, where the
+    samples stop short of the true edge: up to 1.7 % on lilium's eightfold set); >= 99 % of
+    the points; one disk; no flipped UV."""
+    igl = pytest.importorskip("igl")
+    P, V, F, diag = mesh_scan(name, kind, 50_000)
+    rec = jp.reconstruct_surface(P)
+    FR = np.asarray(rec.mesh.faces)
+    d1 = np.sqrt(igl.point_mesh_squared_distance(face_samples(P, FR), V, F)[0])
+    T = mesh_scan(name, "clean", 100_000, seed=7)[0]
+    d2 = np.sqrt(igl.point_mesh_squared_distance(T, P, FR)[0])
+    assert d1.max() <= 0.01 * diag
+    assert np.quantile(d2, 0.999) <= 0.01 * diag
+    assert rec.points_used.size >= 0.99 * len(P)
+    assert rec.mesh.topology.is_disk and jp.distortion(rec.mesh, rec.uv).flips == 0
+
+
+@pytest.mark.slow
+@pytest.mark.data
+@pytest.mark.peer
+def test_clean_camelhead_points_stay_within_half_a_percent():
+    igl = pytest.importorskip("igl")
+    P = jp.load_points(data_path("points", "camelhead.xyz"))
+    src = jp.load(data_path("meshes", "camelhead.off"))
+    V = np.asarray(src.vertices)
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    rec = jp.reconstruct_surface(P)
+    d = np.sqrt(igl.point_mesh_squared_distance(face_samples(P, rec.mesh.faces), V, src.faces)[0])
+    assert d.max() <= 0.005 * diag
+    assert rec.points_used.size >= 0.99 * len(P)
+    assert rec.mesh.topology.is_disk and jp.distortion(rec.mesh, rec.uv).flips == 0
