@@ -190,23 +190,28 @@ CLOSED = ["bunny.off", "cow.off", "3holes.off", "decimated-knight.off", "rocker-
 @pytest.mark.parametrize("nb", [50, 100, 200, 400])
 def test_every_closed_mesh_of_shared_data_at_every_base_count(name, nb):
     mesh = jp.load(data_path("meshes", name))
+    nb = max(nb, fewest_faces(mesh.topology.genus))     # 3holes (genus 3) allows 52 and up
     base, param, semi = _check(mesh, nb, levels=3)
     rep = fidelity(param, semi, mesh, samples=5000)
     # A regression guard, not the issue's 0.5 % goal, which the unsmoothed MAPS map does not
-    # reach on every mesh yet: measured worst at level 3, decimated-knight at 50 base faces
-    # (13 % Hausdorff, 2.4 % RMS: 1000 input faces, thin parts squeezed by the map).
+    # reach on every mesh yet (before the rules were relaxed step by step, the worst at level
+    # 3 was decimated-knight at 50 base faces: 13 % Hausdorff, 2.4 % RMS).
     assert rep.hausdorff < 0.2 and rep.rms < 0.04, rep
 
 
 @pytest.mark.slow
 @pytest.mark.data
-@pytest.mark.parametrize("name", ["bunny.off", "3holes.off", "rocker-arm.obj"])
-def test_level_4_lies_within_one_percent_of_the_diagonal_at_100_base_faces(name):
-    """Measured 0.86 %, 0.28 %, 0.55 % (Hausdorff both ways, bounding-box diagonal)."""
+@pytest.mark.parametrize("name, bound", [("bunny.off", 0.01), ("3holes.off", 0.01), ("rocker-arm.obj", 0.01),
+                                         ("cow.off", 0.02), ("decimated-knight.off", 0.02)])
+def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_faces(name, bound):
+    """Measured 0.83 %, 0.34 %, 0.70 %, 1.30 %, 1.19 % (Hausdorff both ways, bounding-box
+    diagonal; cow and decimated-knight were 4.6 % and 10.2 % before the rules were relaxed
+    step by step, which keeps the tips of thin parts in the base domain).  The issue's goal
+    is 0.5 % on every mesh; a regression guard until smoothing across base edges lands."""
     mesh = jp.load(data_path("meshes", name))
     base, param = manifold_map(mesh, 100)
     rep = param.report(4, samples=20_000)
-    assert rep.hausdorff < 0.01 and rep.rms < 0.001, rep
+    assert rep.hausdorff < bound and rep.rms < bound / 10, rep
 
 
 def test_cli_manifold_method_and_fidelity(tmp_path):
