@@ -5,7 +5,8 @@ other, ``--repeat`` times):
 
 - **cold**: a fresh process with an empty compilation cache (``JAXPARAM_CACHE`` a new folder);
 - **warm cache**: a fresh process whose cache the previous run filled;
-- **in process**: the compiled call, timed inside one process after a first call.
+- **in process**: the first and the second call inside one process, for the default JAX path
+  and for ``host=True`` (NumPy weights and assembly, no tracing; what ``jaxparam flatten`` uses).
 
 Jobs: ``jaxparam flatten MESH -o x.obj`` against a libigl script that loads the mesh, maps the
 boundary to a circle, solves the harmonic map and writes an OBJ with UVs; and ``import
@@ -47,10 +48,11 @@ with open(sys.argv[2], "w") as f:
 
 IN_PROCESS = r'''
 import sys, time, jaxparam as jp
+host = sys.argv[2] == "host"
 mesh = jp.load(sys.argv[1])
-t = time.perf_counter(); jp.convex_map(mesh); first = time.perf_counter() - t
+t = time.perf_counter(); jp.convex_map(mesh, host=host); first = time.perf_counter() - t
 mesh = jp.load(sys.argv[1])
-t = time.perf_counter(); jp.convex_map(mesh); print(first, time.perf_counter() - t)
+t = time.perf_counter(); jp.convex_map(mesh, host=host); print(first, time.perf_counter() - t)
 '''
 
 COMPILES = r'''
@@ -59,10 +61,13 @@ count = [0]
 jax.monitoring.register_event_duration_secs_listener(
     lambda name, secs, **kw: count.__setitem__(0, count[0] + (name == "/jax/core/compile/backend_compile_duration")))
 for path in sys.argv[1:]:
-    before = count[0]
     mesh = jp.load(path)
+    before = count[0]
+    jp.convex_map(mesh, host=True)
+    host = count[0] - before
+    before = count[0]
     jp.convex_map(mesh)
-    print(f"{path.rsplit(chr(47), 1)[-1]:<18} {mesh.faces.shape[0]:>8} {count[0] - before:>9}")
+    print(f"{path.rsplit(chr(47), 1)[-1]:<18} {mesh.faces.shape[0]:>8} {count[0] - before:>9} {host:>9}")
 '''
 
 
@@ -92,8 +97,10 @@ def main() -> None:
                 timed([PY, "-c", IGL_SCRIPT, args.mesh, f"{out}/igl.obj"]))
             rows["import jaxparam"][col].append(timed([PY, "-c", "import jaxparam"], env))
             rows["import jax"][col].append(timed([PY, "-c", "import jax"]))
-    inproc = subprocess.run([PY, "-c", IN_PROCESS, args.mesh], check=True, capture_output=True,
-                            text=True, env={**os.environ, "JAXPARAM_PROGRESS": "0"}).stdout.split()
+    inproc = {path: subprocess.run([PY, "-c", IN_PROCESS, args.mesh, path], check=True,
+                                   capture_output=True, text=True,
+                                   env={**os.environ, "JAXPARAM_PROGRESS": "0"}).stdout.split()
+              for path in ("jax", "host")}
     med = {k: {c: statistics.median(v) for c, v in cols.items()} for k, cols in rows.items()}
     print(f"\nwhole process on {Path(args.mesh).name}, median of {args.repeat} paired runs (s)")
     print(f"{'job':<18} {'cold':>7} {'warm cache':>11}")
@@ -101,12 +108,15 @@ def main() -> None:
         print(f"{k:<18} {cols['cold']:>7.2f} {cols['warm']:>11.2f}")
     ratio = med["jaxparam flatten"]["warm"] / med["libigl script"]["warm"]
     print(f"flatten / libigl script, warm cache: {ratio:.2f} (goal <= 1.5)")
-    print(f"convex_map in process: first call {float(inproc[0]):.3f} s, compiled {float(inproc[1]):.3f} s")
+    for path, (first, again) in inproc.items():
+        print(f"convex_map in process, {path + ' path:':<10} first call {float(first):.3f} s, "
+              f"second {float(again):.3f} s")
     disks = [str(MESHES / n) for n in ("camelhead.off", "camel_b.obj", "lilium.obj", "snail.obj",
                                         "bump-domain.obj", "grid.off", "planexy.off", "halftunnel.off")
              if (MESHES / n).exists()]
-    print("\nXLA compilations of convex_map, one process, meshes in this order")
-    print(f"{'mesh':<18} {'faces':>8} {'compiles':>9}")
+    print("\nXLA compilations of convex_map, one process, meshes in this order "
+          "(host: host=True, the CLI's path, run first on each mesh)")
+    print(f"{'mesh':<18} {'faces':>8} {'jax path':>9} {'host':>9}")
     print(subprocess.run([PY, "-c", COMPILES, *disks], capture_output=True, text=True,
                          env={**os.environ, "JAXPARAM_CACHE": "off", "JAXPARAM_PROGRESS": "0"}
                          ).stdout.rstrip())

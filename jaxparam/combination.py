@@ -94,14 +94,21 @@ def combination_system(entry_row, nbr_free, nbr_fixed, n_free: int) -> Combinati
                              fixed_slot=nbr_fixed[fx], n_free=n)
 
 
-def assemble(system: CombinationSystem, w, uv_fixed, *, normalize: bool):
+def assemble(system: CombinationSystem, w, uv_fixed, *, normalize: bool, host: bool = False):
     """Values of ``A`` on ``system.pattern`` and the right-hand side of eq. (4).
 
     **Arguments:** ``w (k,)`` weights on the entries; ``uv_fixed (n_fixed, 2)`` the fixed
     UVs, indexed by ``system.fixed_slot``; ``normalize``: divide ``w`` by its row sums first
     (see :func:`normalizes`).  **Returns:** ``(vals (nnz,), rhs (n_free, 2))``.
+
+    ``host=True`` with concrete ``w`` and ``uv_fixed`` computes in NumPy and returns NumPy
+    arrays, with no compilation (the cheap path of one-off calls; equal to the JAX kernel to
+    rounding, about 1e-16 relative, not bitwise); otherwise, and always for tracers, the
+    jitted kernel.
     """
     S = system
+    if host and not any(isinstance(x, jax.core.Tracer) for x in (w, uv_fixed)):
+        return _assemble_host(S, w, uv_fixed, normalize=bool(normalize))
     return _assemble(w, uv_fixed, S.entry_row, S.free_entries, S.fixed_entries, S.fixed_slot,
                      S.diag_pos, S.off_pos, normalize=bool(normalize), n_free=S.n_free,
                      nnz=S.pattern.nnz)
@@ -114,6 +121,21 @@ def _assemble(w, uv_fixed, row, ff, fx, fixed_slot, diag_pos, off_pos, *, normal
     rowsum = jax.ops.segment_sum(w, row, num_segments=n_free)
     vals = jnp.zeros(nnz, w.dtype).at[diag_pos].set(rowsum).at[off_pos].add(-w[ff])
     rhs = jax.ops.segment_sum(w[fx][:, None] * uv_fixed[fixed_slot], row[fx], num_segments=n_free)
+    return vals, rhs
+
+
+def _assemble_host(S: CombinationSystem, w, uv_fixed, *, normalize: bool):
+    """The NumPy twin of ``_assemble`` (same formulas, sums by ``np.bincount``)."""
+    w = np.asarray(w, np.float64)
+    if normalize:
+        w = w / np.bincount(S.entry_row, w, minlength=S.n_free)[S.entry_row]
+    vals = np.zeros(S.pattern.nnz, np.float64)
+    vals[S.diag_pos] = np.bincount(S.entry_row, w, minlength=S.n_free)
+    vals[S.off_pos] -= w[S.free_entries]
+    wf = w[S.fixed_entries][:, None] * np.asarray(uv_fixed, np.float64)[S.fixed_slot]
+    rows = S.entry_row[S.fixed_entries]
+    rhs = np.stack([np.bincount(rows, wf[:, 0], minlength=S.n_free),
+                    np.bincount(rows, wf[:, 1], minlength=S.n_free)], 1)
     return vals, rhs
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import boundary as bmap
 from . import combination as comb
+from . import host as _host
 from . import sparse
 from . import weights as wts
 from .disk import disk_check, fill_holes
@@ -70,11 +71,11 @@ def _boundary_key(boundary, k: int):
     """Split a boundary argument into a static key and an optional array of user UVs."""
     if isinstance(boundary, str):
         shape = choose(boundary, bmap.SHAPES, what="boundary", where="boundary")
-        return shape, jnp.zeros((k, 2))
+        return shape, np.zeros((k, 2))          # numpy: no eager compile per loop length
     if isinstance(boundary, dict) and "polygon" in boundary:
         C = np.asarray(boundary["polygon"], np.float64)
         bmap.polygon(np.zeros((3, 3)), C)       # validates shape and convexity up front
-        return tuple(map(tuple, C.tolist())), jnp.zeros((k, 2))
+        return tuple(map(tuple, C.tolist())), np.zeros((k, 2))
     uv = jnp.asarray(boundary, dtype=jnp.float64)
     if uv.shape != (k, 2):
         raise MeshError(f"boundary: the user boundary UVs must have shape ({k}, 2), one row per "
@@ -91,7 +92,7 @@ def _boundary_only(V, loop, user_uv, shape, spacing, corners):
 
 
 def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, spacing, corners,
-              backend, where):
+              backend, where, host: bool = False):
     disk_check(mesh, where)
     spacing = choose(spacing, bmap.SPACINGS, what="spacing", where=where)
     work, added = fill_holes(mesh)
@@ -111,8 +112,21 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
         return uv[: mesh.n_vertices]
     w = w_of(work)
     S = interior_system(t)
-    uv_b = _boundary_slots(V, loop, t.slot[loop], user_uv, shape=shape, spacing=spacing,
-                           corners=corners, nb=t.boundary.size)
+    if host and shape == "circle" and isinstance(w, np.ndarray):
+        # The default boundary, in NumPy too: no kernel to trace for a new loop length.
+        uv_b = np.zeros((t.boundary.size, 2))
+        uv_b[t.slot[loop]] = _host.circle(np.asarray(work.vertices, np.float64)[loop], spacing)
+    else:
+        uv_b = _boundary_slots(V, loop, t.slot[loop], user_uv, shape=shape, spacing=spacing,
+                               corners=corners, nb=t.boundary.size)
+    if host and isinstance(w, np.ndarray) and wts.is_concrete(uv_b):
+        # The cheap path (issue 17): NumPy assembly, a host factorization, a NumPy scatter.
+        uv_b = np.asarray(uv_b)
+        vals, rhs = comb.assemble(S, w, uv_b, normalize=normalize, host=True)
+        x = comb.solve(S, vals, rhs, symmetric=symmetric, backend=backend)
+        uv = np.full((t.n_vertices, 2), np.nan)
+        uv[t.interior], uv[t.boundary] = x, uv_b
+        return uv[: mesh.n_vertices] if added else uv
     vals, rhs = comb.assemble(S, w, uv_b, normalize=normalize)
     x = comb.solve(S, vals, rhs, symmetric=symmetric, backend=backend)
     uv = comb.scatter(x, uv_b, t.interior, t.boundary, n=t.n_vertices)
@@ -120,7 +134,8 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
 
 
 def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="circle",
-               spacing: str = "chord", corners=None, backend: str = "auto", boundary_indices=None):
+               spacing: str = "chord", corners=None, backend: str = "auto", boundary_indices=None,
+               host: bool = False):
     """A convex-combination parameterization (survey §3–4, eq. (3)).
 
     **Arguments:**
@@ -136,6 +151,10 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
       mapping ``{vertex: (u, v)}`` over that loop's vertices, or ``{"polygon": corners}``.
     - ``spacing``: ``"chord"`` or ``"uniform"``; ``corners``: loop positions of
       the square's (or polygon's) corners.
+    - ``host``: with concrete (untraced) vertices, compute the weights, the assembly and the
+      scatter in NumPy, with no tracing or compilation (the cheap path for a one-off call: the
+      CLI uses it); the result is a NumPy array equal to the default JAX path to rounding
+      (1e-13 of the UV extent; not bitwise).  Ignored under ``jax.grad``/``jit``/``vmap``.
 
     **Returns:** ``uv: (n, 2)`` in the mesh's vertex order (``nan`` for
     unreferenced vertices).  One-to-one when the weights are positive and the
@@ -154,10 +173,10 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
     symmetric = weights in wts.SYMMETRIC_KINDS
 
     def w_of(work):
-        return wts.entry_weights(work.vertices, work.topology, weights)[0]
+        return wts.entry_weights(work.vertices, work.topology, weights, host=host)[0]
 
     return _map_with(mesh, w_of, symmetric, comb.normalizes(weights), boundary, spacing, corners,
-                     backend, "convex_map")
+                     backend, "convex_map", host=host)
 
 
 def least_squares_map(mesh: TriMesh, *, mu=None, boundary="circle", spacing: str = "chord",

@@ -20,6 +20,7 @@ import numpy as np
 
 from . import boundary as bmap
 from . import geometry as geo
+from . import host
 from . import weights as wts
 from .errors import MeshError
 from .io import as_mesh
@@ -98,7 +99,9 @@ def face_distortion(mesh, uv) -> dict:
 def flips(mesh, uv) -> int:
     """Number of faces whose UV image is clockwise or degenerate (signed area <= 0)."""
     refuse_traced("metrics.flips", mesh, uv, vertices=False)
-    return int(np.sum(np.asarray(geo.signed_areas(jnp.asarray(uv), mesh.faces)) <= 0))
+    Q = np.asarray(uv, np.float64)[mesh.faces]
+    d1, d2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
+    return int(np.sum(0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) <= 0))
 
 
 def boundary_overlaps(mesh, uv) -> int:
@@ -160,8 +163,13 @@ def theorem1(mesh, uv, *, weights=None) -> Theorem1:
     pos = None
     neg = 0
     if weights is not None:
-        w = wts.convex_weights(mesh, weights) if isinstance(weights, str) else jnp.asarray(weights)
-        w = np.asarray(w)
+        if isinstance(weights, str):
+            # The sign check needs no compilation: the weights in NumPy (jaxparam.host).
+            w, _ = wts.entry_weights(mesh.vertices, t, weights, host=True)
+            R = wts.ring_entries(t)
+            w = w / np.bincount(R.row, w, minlength=R.n_rows)[R.row]
+        else:
+            w = np.asarray(weights)
         neg = int(np.sum(w <= 0))
         pos = neg == 0
     # A dividing edge is mapped into the boundary when its midpoint lies on the polygon.
@@ -203,7 +211,10 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
     """
     mesh = as_mesh(mesh, "distortion")
     refuse_traced("distortion", mesh, uv)
-    fd = face_distortion(mesh, uv)
+    # Concrete values (always, here): the per-face quantities in NumPy, no compilation; equal
+    # to face_distortion's JAX values to about 1e-15 relative (tests/test_speed_paths.py).
+    fd = host.face_quantities(np.asarray(mesh.vertices, np.float64), mesh.faces,
+                              np.asarray(uv, np.float64))
     s1 = np.asarray(fd["s1"])
     s2 = np.asarray(fd["s2"])
     a3 = np.asarray(fd["area3d"])

@@ -32,11 +32,12 @@ import numpy as np
 from .options import choose
 from .errors import MeshError
 from .geometry import safe_norm
+from . import host as _host
 
 __all__ = [
     "KINDS", "SYMMETRIC_KINDS", "FAN_KINDS", "RingEntries", "ring_entries", "entry_weights",
     "convex_weights", "normalize", "edge_values_to_entries", "weights_from_angles",
-    "shape_preserving_weights", "loop_bound", "FanEntries", "fan_entries", "fan_weights",
+    "shape_preserving_weights", "loop_bound", "host_entry_weights", "is_concrete", "FanEntries", "fan_entries", "fan_weights",
 ]
 
 KINDS = ("uniform", "inverse_distance", "shape_preserving", "mean_value", "harmonic")
@@ -240,10 +241,18 @@ def loop_bound(d: int) -> int:
     return 1 << max(3, (d - 1).bit_length())
 
 
-def entry_weights(vertices, topology, kind: str):
+def is_concrete(*xs) -> bool:
+    """True when none of ``xs`` is a JAX tracer (so a NumPy path may replace a traced one)."""
+    return not any(isinstance(x, jax.core.Tracer) for x in xs)
+
+
+def entry_weights(vertices, topology, kind: str, *, host: bool = False):
     """Unnormalized weights of one kind on the interior one-ring entries.
 
-    **Arguments:** ``vertices: (n, 3)``, ``topology``, ``kind`` one of :data:`KINDS`.
+    **Arguments:** ``vertices: (n, 3)``, ``topology``, ``kind`` one of :data:`KINDS`;
+    ``host``: with concrete vertices, compute in NumPy (:func:`host_entry_weights`: no
+    tracing, no compilation; equal to the JAX kernel to about 1e-15 relative, not bitwise
+    for the kinds with transcendental functions); ignored for traced vertices.
     **Returns:** ``(w, symmetric)``: ``w: (k,)`` in :func:`ring_entries` order and
     whether ``w`` is a symmetric spring weight (``w_vw = w_wv``).
     """
@@ -251,11 +260,30 @@ def entry_weights(vertices, topology, kind: str):
     R = ring_entries(topology)
     if R.entry.size == 0:
         raise MeshError("weights: the mesh has no interior vertices; nothing to solve for.")
+    if host and is_concrete(vertices):
+        return host_entry_weights(vertices, topology, kind), kind in SYMMETRIC_KINDS
     V = jnp.asarray(vertices, dtype=jnp.float64)
     w = _weights_kernel(V, topology.faces, R.wedge, R.prev_wedge, R.row, R.row_start, R.row_end,
                         R.degree, kind=kind, n_rows=R.n_rows,
                         max_degree=loop_bound(int(R.degree.max())) if kind == "shape_preserving" else 0)
     return w, kind in SYMMETRIC_KINDS
+
+
+def host_entry_weights(vertices, topology, kind: str) -> np.ndarray:
+    """:func:`entry_weights`' values in NumPy for concrete ``vertices (n, 3)``: ``(k,)``
+    float64 in :func:`ring_entries` order (the twin of the JAX kernel, :mod:`jaxparam.host`)."""
+    R = ring_entries(topology)
+    V = np.asarray(vertices, np.float64)
+    angle, cot, length = _host.corner_geometry(V, topology.faces)
+    if kind == "harmonic":
+        wg, pw = R.wedge, R.prev_wedge
+        nxt_face = wg - wg % 3 + (wg + 2) % 3
+        prv_face = pw - pw % 3 + (pw + 1) % 3
+        return 0.5 * (cot[nxt_face] + cot[prv_face])
+    return _host.weights_from_angles(
+        kind, angle[R.wedge], angle[R.prev_wedge], length[R.wedge], R.row, R.row_start,
+        R.row_end, R.degree, n_rows=R.n_rows,
+        max_degree=loop_bound(int(R.degree.max())) if kind == "shape_preserving" else 0)
 
 
 def normalize(w, topology):

@@ -23,19 +23,11 @@ import sys
 
 from ..errors import JaxparamError
 from ..io import check_output_format
-from ..fitting import KINDS as FIT_KINDS
-from ..fitting import Surface, fit_surface
 from ..linear import convex_map
-from ..manifold import ManifoldParameterization, manifold_map
 from ..options import default_of
 from ..settings import config
-from ..points import WEIGHTS as POINT_WEIGHTS
-from ..points import reconstruct_surface
-from ..remesh import remesh
-from ..wavelets import WAVELETS, compress
 from ..weights import KINDS as WEIGHT_KINDS
 from . import batch, commands
-from .atlas import add_atlas_parser
 from .arguments import HelpFormatter, add_flatten_options, add_mirrored, add_named, subparser, version
 from .pipeline import EXIT_INTERRUPTED, failure, flatten_mesh, report_dict, write_json
 
@@ -57,18 +49,54 @@ def _command(sub, name: str, help: str, func, input_name: str = "mesh", *, repor
     return p
 
 
-def _add_commands(sub) -> None:
-    """Every subcommand but ``batch``."""
+#: The subcommands, in help order.
+COMMANDS = ("info", "flatten", "meshless", "fit", "remesh", "compress", "manifold", "atlas",
+            "batch")
+
+
+def _add_commands(sub, only: str | None = None) -> None:
+    """Every subcommand but ``batch``, or only the one named ``only``.  The modules that a
+    subcommand's options mirror (the points, fitting, remesh, wavelet, manifold and atlas
+    stacks) are imported only when its parser is built, so ``jaxparam flatten`` loads none."""
+    want = lambda name: only is None or only == name        # noqa: E731
+    if want("info"):
+        _add_info(sub)
+    if want("flatten"):
+        _add_flatten(sub)
+    if want("meshless"):
+        _add_meshless(sub)
+    if want("fit"):
+        _add_fit(sub)
+    if want("remesh"):
+        _add_remesh(sub)
+    if want("compress"):
+        _add_compress(sub)
+    if want("manifold"):
+        _add_manifold(sub)
+    if want("atlas"):
+        from .atlas import add_atlas_parser
+
+        add_atlas_parser(sub, _command)
+
+
+def _add_info(sub) -> None:
     p = subparser(sub, "info", "topology facts of a mesh")
     p.add_argument("mesh", help="the input mesh")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=commands.cmd_info)
 
+
+def _add_flatten(sub) -> None:
     p = _command(sub, "flatten", "parameterize a disk mesh", commands.cmd_flatten)
     add_flatten_options(p)
     p.add_argument("--checker-texture", action="store_true",
                    help="embed a checkerboard texture in a .glb/.gltf output, so any glTF "
                         "viewer shows the map")
+
+
+def _add_meshless(sub) -> None:
+    from ..points import WEIGHTS as POINT_WEIGHTS
+    from ..points import reconstruct_surface
 
     p = _command(sub, "meshless", "parameterize and triangulate unorganized points",
                  commands.cmd_meshless, "points")
@@ -76,10 +104,19 @@ def _add_commands(sub) -> None:
     add_named(p, "--weights", POINT_WEIGHTS, default_of(reconstruct_surface, "weights"))
     add_named(p, "--boundary", ["circle", "square"], default_of(reconstruct_surface, "boundary"))
 
+
+def _add_fit(sub) -> None:
+    from ..fitting import KINDS as FIT_KINDS
+    from ..fitting import Surface, fit_surface
+
     p = _command(sub, "fit", "a smooth surface over a mesh's UVs", commands.cmd_fit, report=False)
     add_named(p, "--surface", FIT_KINDS, default_of(fit_surface, "kind"), what="surface kind")
     add_mirrored(p, "--resolution", Surface.sample, "resolution",
                  "samples along each side of the grid")
+
+
+def _add_remesh(sub) -> None:
+    from ..remesh import remesh
 
     p = _command(sub, "remesh", "remesh a disk mesh with subdivision connectivity",
                  commands.cmd_remesh)
@@ -88,11 +125,19 @@ def _add_commands(sub) -> None:
     add_named(p, "--weights", WEIGHT_KINDS, default_of(convex_map, "weights"))
     add_named(p, "--boundary", ["circle", "square"], default_of(convex_map, "boundary"))
 
+
+def _add_compress(sub) -> None:
+    from ..wavelets import WAVELETS, compress
+
     p = _command(sub, "compress", "wavelet compression of a mesh made by jaxparam remesh",
                  commands.cmd_compress, plot=False)
     add_mirrored(p, "--keep", compress, "keep", "fraction of wavelet coefficients kept",
                  type=float)
     add_named(p, "--wavelet", WAVELETS, default_of(compress, "wavelet"))
+
+
+def _add_manifold(sub) -> None:
+    from ..manifold import ManifoldParameterization, manifold_map
 
     p = _command(sub, "manifold", "parameterize a closed mesh of any genus over a base domain "
                  "and remesh it with subdivision connectivity", commands.cmd_manifold)
@@ -105,11 +150,11 @@ def _add_commands(sub) -> None:
                         "relative to the diagonal) and its worst area distortion to --report")
     add_mirrored(p, "--levels", ManifoldParameterization.remesh, "levels", "subdivision levels")
 
-    add_atlas_parser(sub, _command)
 
-
-def build_parser() -> argparse.ArgumentParser:
-    """The ``jaxparam`` argument parser: one subparser per command, ``func`` its handler."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``jaxparam`` argument parser: one subparser per command, ``func`` its handler
+    (``only``: just that subcommand's, which :func:`main` builds when the command line
+    names one, so a command imports only the stacks it uses)."""
     ap = argparse.ArgumentParser(prog="jaxparam", description="Differentiable parameterization "
                                  "of triangle meshes and point sets (Floater & Hormann).",
                                  epilog="'jaxparam COMMAND --help' shows each command's options, "
@@ -119,8 +164,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("-q", "--quiet", action="store_true",
                     help="no progress bars (also JAXPARAM_PROGRESS=0 or TQDM_DISABLE=1)")
     sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    _add_commands(sub)
-    batch.add_parser(sub)
+    _add_commands(sub, only)
+    if only is None or only == "batch":
+        batch.add_parser(sub)
     return ap
 
 
@@ -130,7 +176,9 @@ def main(argv=None) -> int:
     Usage errors exit through argparse (``SystemExit(2)``); library errors are printed as
     ``jaxparam <command>: <message>`` and give 3 or 4 (:func:`~.pipeline.failure`).
     """
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    named = next((a for a in argv if not a.startswith("-")), None)
+    args = build_parser(named if named in COMMANDS else None).parse_args(argv)
     if args.quiet:
         config.progress = False
     try:

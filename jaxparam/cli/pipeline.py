@@ -25,7 +25,6 @@ from ..disk import disk_check
 from ..io import atomic_write
 from ..linear import convex_map
 from ..metrics import distortion
-from ..optimize import minimize
 from ..options import canonical, default_of, hyphenated
 
 __all__ = ["EXIT_OK", "EXIT_INTERNAL", "EXIT_USAGE", "EXIT_INPUT", "EXIT_SOLVER",
@@ -126,9 +125,7 @@ FLATTEN_OPTIONS = ("weights", "boundary", "spacing", "energy", "free_boundary", 
 def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
                  boundary: str = default_of(convex_map, "boundary"),
                  spacing: str = default_of(convex_map, "spacing"), energy: str | None = None,
-                 free_boundary: bool = default_of(minimize, "free_boundary"),
-                 solver: str = default_of(minimize, "solver"),
-                 max_iters: int = default_of(minimize, "max_iters"),
+                 free_boundary: bool = False, solver: str = "newton", max_iters: int = 200,
                  say: Callable[[str], object] = print, verbose: bool | None = None):
     """The flatten pipeline on a loaded disk mesh: a convex map, then, when ``energy`` is
     given, :func:`jaxparam.minimize` from it; then the report.
@@ -156,11 +153,15 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
         say(f"note: {holes} extra boundary loop(s) (holes) filled virtually; the longest loop "
             "is mapped to the boundary")
     seconds.restart()
+    # host=True: the one-off call takes the NumPy path (no tracing, no compilation; equal to
+    # the JAX path to rounding), the largest part of a short command's time (issue 17).
     uv = np.asarray(convex_map(mesh, weights=canonical(weights), boundary=canonical(boundary),
-                               spacing=canonical(spacing)))
+                               spacing=canonical(spacing), host=True))
     seconds("convex_map")
     weights_used = canonical(weights)
     if energy:
+        from ..optimize import minimize     # lazily: the optimize stack costs 0.2 s to import
+
         res = minimize(mesh, canonical(energy), init=uv, free_boundary=free_boundary,
                        solver=canonical(solver), max_iters=max_iters, verbose=verbose)
         seconds("minimize")
