@@ -129,7 +129,7 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     are linear in them for fixed parameters), in the parameters ``uv`` and in the
     evaluation places (``Surface.evaluate(uv)``, ``Surface.sample``'s points).
     **Held fixed** (chosen on the concrete values): the rows kept (finite ``uv`` and
-    points), the bounding rectangle ``bbox`` and so the knots (moving parameters
+    points; for a mesh, the vertices some face uses), the bounding rectangle ``bbox`` and so the knots (moving parameters
     do not move them), and which spline coefficients are zero, the rank and the
     pivots; for Clough–Tocher the Delaunay triangulation, the triangle holding each
     evaluation place and which places are outside (``nan``).  Under ``jax.jit`` the
@@ -152,6 +152,10 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
         raise MeshError(f"fit_surface: uv must have shape ({n_pts}, 2), got {Uc.shape}.")
     Xc = concrete_values(X_in)
     ok = np.all(np.isfinite(Uc), axis=1)
+    if isinstance(mesh_or_points, TriMesh):
+        # a vertex no face uses is not on the surface (e.g. a reconstruction's outliers, which
+        # carry their nearest kept point's UV): it would be a second value at the same place
+        ok &= np.asarray(mesh_or_points.topology.referenced, bool)
     if Xc is not None:
         ok &= np.all(np.isfinite(Xc), axis=1)
     if int(ok.sum()) < 16:

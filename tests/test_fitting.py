@@ -47,3 +47,15 @@ def test_fit_errors(mesh_uv):
         jp.fit_surface(mesh, uv, kind="nurbs")
     with pytest.raises(jp.MeshError, match=r"uv must have shape"):
         jp.fit_surface(mesh, uv[:5])
+
+
+def test_unused_vertices_do_not_enter_the_fit(mesh_uv):
+    """A vertex no face uses (a reconstruction's outlier, given its neighbour's UV) is left out:
+    Clough-Tocher still interpolates every used vertex."""
+    mesh, uv = mesh_uv
+    V = np.vstack([np.asarray(mesh.vertices), np.asarray(mesh.vertices)[:1] + 0.5])
+    U = np.vstack([np.asarray(uv), np.asarray(uv)[:1]])            # same place, another value
+    with_stray = jp.TriMesh(V, mesh.faces)
+    surf = jp.fit_surface(with_stray, U, kind="clough_tocher")
+    np.testing.assert_allclose(np.asarray(surf.evaluate(np.asarray(uv))), np.asarray(mesh.vertices),
+                               atol=1e-8)

@@ -27,8 +27,10 @@ Pipeline (numpy for the combinatorics, JAX for what depends on coordinates):
    meshes (:mod:`jaxparam.combination`, the differentiable sparse solve):
    :func:`meshless_map`.
 
-Step 2 also drops neighbour pairs that leave a tangent plane steeply (they
-join the two sides of parts thinner than the spacing).  Large clouds are
+Step 2 also orients the normals consistently (signs propagated along a minimum spanning
+tree of the neighbour graph, :mod:`.orientation`) and drops neighbour pairs that leave a
+tangent plane steeply or join opposed normals (they join the two sides of parts thinner
+than the spacing).  Large clouds are
 processed in Morton (Z-curve) order and in blocks of points, for memory
 locality; results come back in the input's order.
 
@@ -39,10 +41,11 @@ parts of the boundary and the ears over boundary points the detector missed;
 it returns a :class:`Reconstruction`.
 
 Modules: :mod:`.defaults` (the default settings), :mod:`.graph` (neighbourhoods, robust
-frames, fans, Morton order), :mod:`.outliers` (outlier test, dropping points from neighbour
-lists), :mod:`.smoothing` (MLS / plane projection), :mod:`.boundary` (detection),
-:mod:`.meshless` (checks and the map), :mod:`.triangulation` (Delaunay, flips, peeling of
-bridges, lone points, the largest disk), :mod:`.reconstruct`.
+frames, fans, Morton order), :mod:`.orientation` (consistent normal signs),
+:mod:`.outliers` (outlier test, dropping points from neighbour lists), :mod:`.smoothing`
+(MLS / plane projection), :mod:`.boundary` (detection), :mod:`.meshless` (checks and the
+map), :mod:`.triangulation` (Delaunay, flips, peeling of bridges, lone points, the largest
+disk), :mod:`.reconstruct`.
 """
 from __future__ import annotations
 

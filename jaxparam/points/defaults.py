@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["K", "K_DETECT", "K_FRAME", "GAP", "MAX_SLOPE", "BRIDGE_FACTOR", "FLIP_ROUNDS",
+__all__ = ["K", "K_DETECT", "K_FRAME", "GAP", "MAX_SLOPE", "MIN_NORMAL_DOT", "BRIDGE_FACTOR", "FLIP_ROUNDS",
            "OUTLIER_SCALE", "OUTLIER_HEIGHT", "OUTLIER_ISOLATION",
            "OUTLIER_ROUNDS"]
 
@@ -29,6 +29,10 @@ GAP = 0.7 * math.pi
 #: Largest ``|n . d| / |d|`` of a neighbour pair ``d`` against either point's normal ``n``
 #: (about 37 degrees): steeper pairs join the two sides of parts thinner than the spacing.
 MAX_SLOPE = 0.6
+
+#: Smallest ``n_v . n_w`` of a neighbour pair's consistently oriented normals: pairs with
+#: opposed normals (more than 90 degrees apart) cross between two sheets and leave the graph.
+MIN_NORMAL_DOT = 0.0
 
 #: A hull face of the reconstruction whose longest 3D edge exceeds this many local point
 #: spacings bridges a concave part of the boundary and is peeled off.

@@ -15,7 +15,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import PointCloudError, first_few
 from ..topology import permute_rows
-from .defaults import K, K_DETECT, K_FRAME, MAX_SLOPE
+from .defaults import K, K_DETECT, K_FRAME, MAX_SLOPE, MIN_NORMAL_DOT
+from .orientation import orient_normals
 
 __all__ = ["BLOCK", "nearest_neighbours", "knn_graph", "PointGraph", "point_graph", "point_graph_in_order",
            "tangent_frames", "drop_steep_pairs", "global_frame", "spatial_order", "morton_keys",
@@ -71,7 +72,9 @@ class PointGraph:
     - ``indptr (N+1,)``, ``indices``: each point's neighbours as CSR rows, sorted
       anticlockwise around it in its PCA tangent plane (a star-shaped fan);
     - ``gap (N,)``: the largest angular gap between consecutive fan neighbours (radians);
-    - ``normal (N, 3)``: unit normals, turned towards the best-fit plane's normal;
+    - ``normal (N, 3)``: unit normals, oriented consistently over the neighbour graph
+      (:func:`~jaxparam.points.orientation.orient_normals`), each component turned towards
+      the best-fit plane's normal;
     - ``spacing (N,)``: the mean distance to the fan's neighbours;
     - ``detect_k``: how many nearest neighbours ``detect_gap`` and ``detect_spacing`` were
       computed for (0: not computed, both ``None``);
@@ -158,8 +161,16 @@ def point_graph_in_order(P: np.ndarray, k: int = K, *, radius: float | None = No
         normal, e1, e2 = frames.normal, frames.e1, frames.e2
     else:
         normal, e1, e2 = tangent_frames(P, indptr, indices)
+    # Signs propagated over the graph (not only turned towards the best-fit plane), so that
+    # the two sides of a part thinner than the spacing get opposed normals ...
+    flip = np.einsum("ij,ij->i", orient_normals(P, indptr, indices, normal, global_frame(P)[2]),
+                     normal) < 0
+    if flip.any():
+        normal, e1 = np.where(flip[:, None], -normal, normal), np.where(flip[:, None], -e1, e1)
     if max_slope < 1:
-        indptr, indices = drop_steep_pairs(P, indptr, indices, normal, max_slope, exempt)
+        # ... and pairs between them (opposed normals) leave the graph with the steep ones.
+        indptr, indices = drop_steep_pairs(P, indptr, indices, normal, max_slope, exempt,
+                                           min_dot=MIN_NORMAL_DOT)
         _check_degree(indptr, names, 2)
     deg = np.diff(indptr)
     gap, spacing = np.empty(N), np.empty(N)
@@ -337,10 +348,13 @@ def smallest_eigenvector(C: np.ndarray) -> np.ndarray:
     return v / nv[:, None]
 
 
-def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.ndarray | None = None):
+def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.ndarray | None = None,
+                     *, min_dot: float = -1.0):
     """Remove the neighbour pairs ``v, w`` whose direction leaves either tangent plane by more
-    than ``|n . (w - v)| / |w - v| > max_slope``: on a thin part of the surface (an ear)
-    they join its two sides, and the map would fold that part onto itself.  Points that
+    than ``|n . (w - v)| / |w - v| > max_slope``, and those whose consistently oriented
+    normals are opposed, ``n_v . n_w < min_dot`` (default ``-1``: none): on a thin part of
+    the surface (an ear) they join its two sides, and the map would fold that part onto
+    itself.  Points that
     would keep fewer than three neighbours keep all of theirs (pairs stay symmetric), and so
     do the points ``exempt (N,) bool`` (default: none).
 
@@ -356,6 +370,9 @@ def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.nd
         tilt = np.maximum(np.abs(np.einsum("ij,ij->i", d, np.repeat(normal[r0:r1], deg[r0:r1], axis=0))),
                           np.abs(np.einsum("ij,ij->i", d, normal[idx])))
         keep[lo:hi] = tilt <= max_slope * np.sqrt(np.einsum("ij,ij->i", d, d))
+        if min_dot > -1:
+            keep[lo:hi] &= np.einsum("ij,ij->i", np.repeat(normal[r0:r1], deg[r0:r1], axis=0),
+                                     normal[idx]) >= min_dot
     rows = np.repeat(np.arange(N), deg)
     weak = np.add.reduceat(keep.astype(np.int64), indptr[:-1]) < 3
     if exempt is not None:

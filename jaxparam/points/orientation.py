@@ -1,0 +1,71 @@
+"""Consistent normal orientation of a point set (Hoppe et al. 1992): signs propagated along a
+minimum spanning tree of the neighbour graph, so that neighbouring normals agree.
+
+numpy / scipy on concrete points (topology); everything is vectorized: the tree by
+:func:`scipy.sparse.csgraph.minimum_spanning_tree`, the sign products along its paths to the
+root by pointer doubling (``log2(depth)`` gathers).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+
+__all__ = ["orient_normals"]
+
+
+def orient_normals(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray, normal: np.ndarray,
+                   towards: np.ndarray) -> np.ndarray:
+    """Normals ``(N, 3)`` with signs made consistent over the neighbour graph.
+
+    **Arguments:** ``P (N, 3)`` points; ``indptr (N+1,)``, ``indices`` their neighbour graph
+    (CSR); ``normal (N, 3)`` unit normals of any signs; ``towards (3,)`` the direction each
+    connected component's normals are turned to on the whole (their sum has a non-negative
+    component along it).
+
+    The tree is the minimum spanning tree of the graph under the weight ``1 - |n_v . n_w|``
+    (Hoppe's: sign information travels between nearly parallel normals) plus the pair's
+    slope ``max(|n_v . d|, |n_w . d|) / |d|`` (a pair that leaves the tangent planes, as one
+    crossing between two sheets of a thin part does, is used only when nothing else
+    connects).  Along each tree edge the child takes the sign that makes
+    ``n_child . n_parent >= 0``.
+
+    **Returns:** ``(N, 3)`` the normals, each equal to ``normal`` up to sign.
+    """
+    N = P.shape[0]
+    rows = np.repeat(np.arange(N), np.diff(indptr))
+    cols = np.asarray(indices)
+    # Each pair once, as (smaller, larger) (the weight is symmetric; a directed pair counts as
+    # undirected); a pair listed both ways is averaged below.
+    up = rows < cols
+    rows, cols = np.where(up, rows, cols), np.where(up, cols, rows)
+    d = P[cols] - P[rows]
+    ln = np.sqrt(np.einsum("ij,ij->i", d, d)) + 1e-300
+    slope = np.maximum(np.abs(np.einsum("ij,ij->i", d, normal[rows])),
+                       np.abs(np.einsum("ij,ij->i", d, normal[cols]))) / ln
+    dot = np.einsum("ij,ij->i", normal[rows], normal[cols])
+    # Strictly positive: a zero weight would be read as no edge.
+    W = sp.csr_matrix((1.0 - np.abs(dot) + slope + 1e-9, (rows, cols)), shape=(N, N))
+    W.data /= sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(N, N)).data
+    T = minimum_spanning_tree(W)
+    T = (T + T.T).tocsr()
+    nc, lab = connected_components(T, directed=False)
+    parent = np.arange(N)
+    # One breadth-first tree per component, from its first point.
+    roots = np.unique(lab, return_index=True)[1]
+    for r in roots[np.bincount(lab)[lab[roots]] > 1]:     # loop over components, not points
+        order, pred = breadth_first_order(T, int(r), directed=False, return_predecessors=True)
+        parent[order[1:]] = pred[order[1:]]
+    # Sign of each point relative to its parent, then products along the paths to the roots.
+    sign = np.where(np.einsum("ij,ij->i", normal, normal[parent]) < 0, -1.0, 1.0)
+    anc = parent.copy()
+    while True:
+        nxt = anc[anc]
+        sign = sign * np.where(anc == nxt, 1.0, sign[anc])
+        if np.array_equal(nxt, anc):
+            break
+        anc = nxt
+    n = normal * sign[:, None]
+    # Each component turned towards ``towards`` on the whole.
+    s = np.bincount(lab, weights=n @ np.asarray(towards, np.float64), minlength=nc)
+    return n * np.where(s[lab] < 0, -1.0, 1.0)[:, None]
