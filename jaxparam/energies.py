@@ -36,7 +36,7 @@ from . import geometry as geo
 from .errors import MeshError
 
 __all__ = ["Energy", "Densities", "energy", "ENERGIES", "get", "mips_prop2", "total",
-           "params_equal", "captures_tracer"]
+           "params_equal", "captures_tracer", "density_stretch"]
 
 
 class Densities(NamedTuple):
@@ -369,3 +369,40 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
     make = _from_sv if n == 2 else _from_J
     return make(name or getattr(fn, "__name__", "user"), fn, scale_invariant, barrier=barrier,
                 parametric=parametric, params=params if parametric else None)
+
+
+_STRETCH_OF_J = _SingularValueForm(lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2), True)
+
+
+def _density_stretch(frame, q, params):
+    """Sander et al.'s L2 stretch of one triangle times ``(|T| / mean_area) ** -power``
+    (``params = (mean_area, power)``; ``|T|`` from the frame ``(3, 2)``)."""
+    mean_area, power = params
+    e1, e2 = frame[1] - frame[0], frame[2] - frame[0]
+    a = 0.5 * jnp.abs(e1[0] * e2[1] - e1[1] * e2[0])
+    return (a / mean_area) ** (-power) * _STRETCH_OF_J(geo.jacobian_from_frame(frame, q))
+
+
+def density_stretch(mean_area: float, power: float = 1.0) -> Energy:
+    """The L2 stretch (``ENERGIES["stretch"]``) weighted by the input's face density: each
+    triangle's density times ``(|T| / mean_area) ** -power``.
+
+    With ``power = 1`` every face counts the same in the mesh energy (10) instead of by its
+    3D area, so regions the input resolves with many small faces (a scan's detail) get
+    proportionally more parameter area, and a remesh's dyadic grid more samples there.
+    ``mean_area`` (mesh units squared, e.g. the mean face area) only scales the energy.
+    A function of the frame (the weight needs the 3D area), so the minimizer differentiates
+    it in the 6 UVs of each face.  Used by :func:`jaxparam.remesh.area_aware_map`.
+
+    Example::
+
+        en = density_stretch(float(jnp.mean(jp.geometry.face_areas(V, F))))
+        jp.minimize(mesh, en, init=jp.convex_map(mesh))
+    """
+    if not isinstance(mean_area, jax.core.Tracer):
+        if not (np.isfinite(mean_area) and mean_area > 0):
+            raise MeshError(f"density_stretch: mean_area must be a positive area, got "
+                            f"{mean_area!r}.")
+        mean_area = float(mean_area)
+    return Energy("density_stretch", _density_stretch, parametric=True,
+                  params=(mean_area, float(power)))

@@ -42,7 +42,9 @@ import numpy as np
 
 from .errors import MeshError, first_few
 from .disk import disk_check
+from . import geometry
 from .distance import surface_distance
+from .energies import density_stretch
 from .linear import convex_map
 from .mesh import TriMesh, concrete_values
 from .io import as_mesh
@@ -50,8 +52,8 @@ from .optimize import minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
 from .triangles import barycentric, locate, signed_area2
 
-__all__ = ["Remesh", "RemeshErrors", "remesh", "area_aware_map", "measure_errors",
-           "default_samples", "base_domain", "refine_domain", "BoundaryCurve"]
+__all__ = ["Remesh", "RemeshErrors", "remesh", "area_aware_map", "area_map_iters", "measure_errors",
+           "default_samples", "base_domain", "refine_domain", "snap_boundary", "BoundaryCurve"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -295,7 +297,7 @@ def refine_domain(uv0, faces0, s0, curve: BoundaryCurve, levels: int):
     """``levels`` dyadic refinements of a base domain whose boundary vertices sit at arc
     lengths ``s0`` on ``curve``; new boundary vertices go onto the curve halfway between
     their parents.  **Returns:** ``(uv (n_j, 2), Hierarchy)``."""
-    uv, H, _ = _refine(uv0, faces0, s0, curve, levels)
+    uv, H, _, _ = _refine(uv0, faces0, s0, curve, levels)
     return uv, H
 
 
@@ -303,7 +305,8 @@ def _refine(uv0, faces0, s0, curve: BoundaryCurve, levels: int):
     """:func:`refine_domain`, also returning per level the discrete choices that
     :func:`_refine_jax` repeats: ``(p, q, n_half, n_new, n_at, seg)`` for the new boundary
     vertices (parents, the wraps of the half arc, of the new arc length and of the point
-    lookup, the polygon segment)."""
+    lookup, the polygon segment), and every vertex's arc length ``s (n_j,)`` (``nan``
+    inside)."""
     uv, s = np.asarray(uv0, np.float64), np.asarray(s0, np.float64)
     H = dyadic_hierarchy(faces0, uv.shape[0], levels)
     L = curve.length
@@ -325,7 +328,7 @@ def _refine(uv0, faces0, s0, curve: BoundaryCurve, levels: int):
         steps.append((p, q, _wraps(x, d + 0.5 * L, L), _wraps(y, s_b, L), _wraps(s_b, s_at, L), seg))
         uv = np.concatenate([uv, mid])
         s = np.concatenate([s, s_new])
-    return uv, H, steps
+    return uv, H, steps, s
 
 
 def _refine_jax(uv0, s0, curve: _CurveJax, H: Hierarchy, steps):
@@ -362,27 +365,80 @@ def _sample_points_jax(uv, loop, fan, s0, curve: BoundaryCurve, H: Hierarchy, st
     return _refine_jax(uv0, jnp.concatenate([s_raw, jnp.zeros(1, s_raw.dtype)]), cj, H, steps)
 
 
-#: Newton steps of the default area-aware map (:func:`area_aware_map`): the L2 stretch drops by
-#: > 99 % of its excess within about 10-15 steps on the shared disk meshes; later steps change
-#: the remesh error by under 1 %.
+def snap_boundary(uvj: np.ndarray, s: np.ndarray, curve: BoundaryCurve, faces: np.ndarray):
+    """Boundary sample points moved onto the input's boundary vertices, so that the remesh's
+    boundary passes through the input's boundary corners instead of cutting them.
+
+    **Arguments:** ``uvj (n_j, 2)`` the sample points, ``s (n_j,)`` their arc lengths on
+    ``curve`` (``nan`` inside), ``faces`` the finest faces (to check for folds).
+
+    Each input boundary vertex ``k`` (at arc length ``curve.cum[k]``) takes the boundary
+    sample nearest it by arc length; a sample claimed by several keeps the nearest.  A sample
+    moves by at most half the gap to a neighbour, so the boundary's order is kept; if a
+    refined triangle would fold all the same, nothing moves.
+
+    **Returns:** ``(uv (n_j, 2), idx (k,), pos (k,))``: the moved points and which samples
+    ``idx`` went onto which boundary polygon vertices ``pos`` (positions in the loop).
+    """
+    bidx = np.flatnonzero(np.isfinite(s))
+    L = curve.length
+    if bidx.size < 3 or not L > 0:
+        return uvj, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    order = np.argsort(s[bidx], kind="stable")
+    bidx, ss = bidx[order], s[bidx][order]
+    c = curve.cum[:-1]
+    j = np.searchsorted(ss, c) % ss.size                 # the sample at or after each vertex
+    i = (j - 1) % ss.size                                # the one before
+    d_j = np.abs(np.mod(ss[j] - c + 0.5 * L, L) - 0.5 * L)
+    d_i = np.abs(np.mod(ss[i] - c + 0.5 * L, L) - 0.5 * L)
+    near = np.where(d_j <= d_i, j, i)
+    dist = np.minimum(d_j, d_i)
+    pick = np.lexsort((dist, near))                      # by sample, nearest first
+    first = np.concatenate([[True], near[pick][1:] != near[pick][:-1]])
+    pos = pick[first]
+    idx = bidx[near[pos]]
+    out = uvj.copy()
+    out[idx] = curve.points[pos]
+    if np.any(signed_area2(out, faces) <= 0):
+        return uvj, np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return out, idx.astype(np.int64), pos.astype(np.int64)
+
+
+#: Newton steps of the default area-aware map (:func:`area_aware_map`) on meshes of up to
+#: :data:`AREA_MAP_FULL_FACES` faces: the stretch drops by > 99 % of its excess within about
+#: 10-15 steps on the shared disk meshes; later steps change the remesh error by under 1 %.
 AREA_MAP_ITERS = 25
+#: Above this many faces the default step count falls as ``AREA_MAP_ITERS * FULL / faces``
+#: (at least :data:`AREA_MAP_MIN_ITERS`), so the map's cost stays about flat in the mesh size.
+AREA_MAP_FULL_FACES = 40_000
+AREA_MAP_MIN_ITERS = 3
 
 
-def area_aware_map(mesh: TriMesh, *, energy="stretch", max_iters: int = AREA_MAP_ITERS,
+def area_map_iters(n_faces: int) -> int:
+    """The default Newton step count of :func:`area_aware_map` for a mesh of ``n_faces``."""
+    scaled = AREA_MAP_ITERS * AREA_MAP_FULL_FACES // max(int(n_faces), 1)
+    return int(min(AREA_MAP_ITERS, max(AREA_MAP_MIN_ITERS, scaled)))
+
+
+def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | None = None,
                    weights: str = "shape_preserving"):
     """The default parameterization of :func:`remesh`: one that samples by area.
 
     A convex-combination map (``weights``, the boundary on the unit circle by chord length),
     then a flip-free minimization (:func:`jaxparam.minimize`, projected Newton, at most
-    ``max_iters`` steps) of ``energy`` with that boundary fixed; by default Sander et al.'s L2
-    stretch (survey ref. [27], ``jp.energies.ENERGIES["stretch"]``), which grows without bound
-    where a triangle is small in the plane for its area on the surface: the squeeze that a
-    convex-combination map gives the parts of a mesh far from its centre, and that leaves
-    the remesh's dyadic grid too few samples there.
+    ``max_iters`` steps; default :func:`area_map_iters`: 25 up to 40k faces, fewer above) of
+    ``energy`` with that boundary fixed.  By default Sander et al.'s L2 stretch (survey ref.
+    [27]) weighted by the input's face density (:func:`jaxparam.energies.density_stretch`:
+    every face counts the same, not by its area): the stretch grows without bound where a
+    triangle is small in the plane for its area on the surface (the squeeze that a
+    convex-combination map gives the parts of a mesh far from its centre, which leaves the
+    remesh's dyadic grid too few samples there), and the weight gives the regions that the
+    input resolves finely (a scan's detail) more parameter area.
 
-    **Arguments:** ``mesh`` a disk; ``energy`` a name or :class:`jaxparam.Energy` (measured on
-    camelhead at level 6, the remesh's Hausdorff error is 0.76 % of the diagonal with
-    ``"stretch"``, 1.37 % with ``"symmetric_dirichlet"``, 7.8 % with the plain convex map).
+    **Arguments:** ``mesh`` a disk; ``energy`` ``"density_stretch"``, another name of
+    ``jp.energies.ENERGIES`` or a :class:`jaxparam.Energy` (measured on camelhead at level 6,
+    the remesh's Hausdorff error is 0.54 % of the diagonal with ``"density_stretch"``, 0.98 %
+    with ``"stretch"``, 1.37 % with ``"symmetric_dirichlet"``, 7.8 % with the plain convex map).
 
     **Returns:** ``uv (n, 2)``, one-to-one (every step is flip-free), boundary on the unit
     circle; differentiable in ``mesh.vertices`` (the implicit gradient of the minimization).
@@ -392,9 +448,14 @@ def area_aware_map(mesh: TriMesh, *, energy="stretch", max_iters: int = AREA_MAP
         uv = area_aware_map(mesh)
         semi = jp.remesh(mesh, uv, levels=5)      # the same as jp.remesh(mesh, levels=5)
     """
+    if isinstance(energy, str) and energy == "density_stretch":
+        areas = geometry.face_areas(jax.lax.stop_gradient(jnp.asarray(mesh.vertices)), mesh.faces)
+        energy = density_stretch(jnp.mean(areas) if isinstance(areas, jax.core.Tracer)
+                                 else float(np.mean(np.asarray(areas))))
+    iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
     start = convex_map(mesh, weights=weights, boundary="circle")
     res = minimize(mesh, energy, init=start, free_boundary=False, solver="newton",
-                   max_iters=int(max_iters), verbose=False)
+                   max_iters=iters, verbose=False)
     return res.uv
 
 
@@ -492,11 +553,12 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
                         "are flipped or degenerate in the UVs; use a convex-combination map.")
     loop = t.boundary_loops[0]
     uv0, F0, s0, curve = base_domain(U, loop, fan)
-    uvj, H, steps = _refine(uv0, F0, s0, curve, int(levels))
+    uvj, H, steps, s_all = _refine(uv0, F0, s0, curve, int(levels))
     bad = np.flatnonzero(signed_area2(uvj, H.faces[-1]) <= 0)
     if bad.size:
         raise MeshError(f"remesh: {bad.size} refined triangles fold over where the boundary bends "
                         f"(e.g. face {int(bad[0])}); use more corners or a convex boundary map.")
+    uvj, snap_idx, snap_pos = snap_boundary(uvj, s_all, curve, H.faces[-1])
     face, bary = locate(U, mesh.faces, uvj)
     idx = mesh.faces[face]
     V = jnp.asarray(mesh.vertices)
@@ -504,6 +566,8 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
         # The same sample points and coordinates as functions of the traced UVs (the located
         # faces, segments and wraps held fixed), clipped and normalized as locate does.
         uvj = _sample_points_jax(uv, loop, fan, s0, curve, H, steps)
+        if snap_idx.size:
+            uvj = uvj.at[jnp.asarray(snap_idx)].set(uv[jnp.asarray(loop[snap_pos])])
         b = jnp.maximum(barycentric(uv[jnp.asarray(idx)], uvj, xp=jnp), 0.0)
         bary = b / jnp.sum(b, axis=1, keepdims=True)
     X = jnp.einsum("kc,kcd->kd", jnp.asarray(bary), V[jnp.asarray(idx)])

@@ -206,3 +206,70 @@ def test_cli_remesh_report_has_the_errors_per_level(tmp_path):
     assert e["levels"] == [0, 1, 2] and len(e["hausdorff_ab"]) == 3 and len(e["rms_ba"]) == 3
     assert e["relative_to"] == "input bounding-box diagonal"
     assert e["rms"][2] < e["rms"][1] < e["rms"][0]
+
+
+def test_density_stretch_weights_each_face_by_its_inverse_area(mesh):
+    """The density-weighted stretch is the stretch times (|T| / mean) ** -power, face by face,
+    so with power 1 every face counts the same in the mesh energy."""
+    from jaxparam.energies import density_stretch
+    uv = jnp.asarray(jp.convex_map(mesh, boundary="circle"))
+    frames = geo.local_frames(jnp.asarray(mesh.vertices), mesh.faces)
+    A = np.asarray(geo.face_areas(jnp.asarray(mesh.vertices), mesh.faces))
+    Q = uv[mesh.faces]
+    plain = np.asarray(jax.vmap(ENERGIES["stretch"].densities().density)(frames, Q))
+    for power in (1.0, 2.0):
+        en = density_stretch(float(A.mean()), power)
+        got = np.asarray(jax.vmap(en.densities().density)(frames, Q))
+        np.testing.assert_allclose(got, plain * (A / A.mean()) ** -power, rtol=1e-12)
+    flipped = Q.at[0].set(Q[0, ::-1])
+    assert not np.isfinite(float(density_stretch(1.0).densities().density(frames[0], flipped[0])))
+    with pytest.raises(jp.errors.MeshError, match="mean_area"):
+        density_stretch(0.0)
+
+
+def test_the_default_map_gives_small_faces_more_parameter_area_than_the_plain_stretch():
+    """On a mesh fine on one half and coarse on the other (same surface), the density-weighted
+    default gives the fine half's faces a larger share of the disk than the plain stretch."""
+    g = jp.shapes.plane_grid(12, 12)
+    U = np.asarray(g.vertices)[:, :2]
+    x = U[:, 0] ** 1.8                                     # faces shrink towards x = 0
+    m = jp.TriMesh(np.column_stack([x, U[:, 1], 0.3 * np.sin(3 * x) * np.cos(2 * U[:, 1])]), g.faces)
+    A = np.asarray(geo.face_areas(jnp.asarray(m.vertices), m.faces))
+    small = A < np.median(A)
+    share = {}
+    for name in ("density_stretch", "stretch"):
+        uv = np.asarray(area_aware_map(m, energy=name))
+        a = np.asarray(geo.signed_areas(jnp.asarray(uv), m.faces))
+        assert np.all(a > 0)
+        share[name] = a[small].sum() / a.sum()
+    assert share["density_stretch"] > share["stretch"] + 0.02
+
+
+def test_area_map_iters_fall_with_the_size():
+    from jaxparam.remesh import AREA_MAP_ITERS, AREA_MAP_MIN_ITERS, area_map_iters
+    assert area_map_iters(1_000) == AREA_MAP_ITERS
+    assert AREA_MAP_MIN_ITERS <= area_map_iters(363_264) < AREA_MAP_ITERS
+    assert area_map_iters(10 ** 8) == AREA_MAP_MIN_ITERS
+
+
+def test_boundary_samples_snap_onto_the_input_boundary_corners():
+    """A disk whose boundary zigzags: every input boundary vertex becomes a remesh vertex
+    (the remesh's boundary passes through the corners instead of cutting them), with no
+    fold, and traced UVs give the same points."""
+    from jaxparam.remesh import snap_boundary  # noqa: F401
+    n = 24
+    t = 2 * np.pi * np.arange(n) / n
+    r = 1 + 0.15 * (np.arange(n) % 2)                      # zigzag boundary
+    ring = np.column_stack([r * np.cos(t), r * np.sin(t), 0.2 * (np.arange(n) % 2)])
+    V = np.concatenate([ring, [[0.0, 0.0, 0.3]]])
+    F = np.stack([np.arange(n), (np.arange(n) + 1) % n, np.full(n, n)], 1)
+    m = jp.TriMesh(V, F)
+    uv = np.asarray(jp.convex_map(m, boundary="circle"))
+    semi = jp.remesh(m, uv, levels=3)                     # 6 * 8 = 48 boundary samples >= 24
+    X = np.asarray(semi.mesh.vertices)
+    d, _ = cKDTree(X).query(ring)
+    assert d.max() < 1e-12
+    assert np.all(np.asarray(geo.signed_areas(jnp.asarray(semi.uv), semi.mesh.faces)) > 0)
+    traced = jax.jvp(lambda u: jp.remesh(m, u, levels=3).mesh.vertices, (jnp.asarray(uv),),
+                     (jnp.zeros_like(jnp.asarray(uv)),))[0]
+    np.testing.assert_allclose(np.asarray(traced), X, atol=1e-12)
