@@ -185,6 +185,8 @@ def test_atlas_refuses_bad_input():
         atlas(mesh, texture_size=2)
     with pytest.raises(jp.MeshError, match="cone"):
         atlas(mesh, cone=200)
+    with pytest.raises(jp.MeshError, match="merge_cone"):
+        atlas(mesh, merge_cone=0.0)
     with pytest.raises(jp.MeshError, match="tracers"):
         jax.grad(lambda X: jnp.sum(atlas(jp.TriMesh(X, mesh.faces)).uv))(jnp.asarray(mesh.vertices))
     # a non-manifold mesh is refused by the library before any atlas work

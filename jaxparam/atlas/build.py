@@ -31,7 +31,7 @@ def _flatten_subset(V, F, chart, faces_idx, en, weights, solver, max_iters):
 def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 1024,
           margin_texels: int = 2, cone: float = 88.0, max_aspect: float = 8.0,
           weights: str = "shape_preserving", solver="newton", max_iters: int = 200,
-          max_splits: int = 12) -> Atlas:
+          max_splits: int = 12, merge_cone: float | None = None) -> Atlas:
     """A UV atlas of any manifold mesh: closed or open, any genus, several components.
 
     **Arguments:**
@@ -41,7 +41,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
     - ``texture_size``: texels a side of the texture the atlas is packed for;
       ``margin_texels``: the least gap between two charts, in texels.
     - ``cone``: the largest angle (degrees) between a face normal and its chart's mean
-      normal while charts grow and merge.
+      normal while charts grow; ``merge_cone``: the same while charts merge (default
+      ``cone``).
     - ``max_aspect``: a chart whose map has a triangle with ``s1/s2`` above this, or whose
       boundary crosses itself, is split in two and flattened again (at most ``max_splits``
       rounds).
@@ -81,13 +82,15 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         raise MeshError(f"atlas: margin_texels must be >= 0, got {margin_texels}.")
     if not 0 < cone < 180:
         raise MeshError(f"atlas: cone must be an angle in (0, 180) degrees, got {cone}.")
+    if merge_cone is not None and not 0 < merge_cone < 180:
+        raise MeshError(f"atlas: merge_cone must be an angle in (0, 180) degrees or None, got {merge_cone}.")
     en = en_mod.get(energy)
     t0 = time.perf_counter()
     seconds = {}
     V = np.asarray(mesh.vertices, np.float64)
     t = mesh.topology
     F = t.faces
-    chart = ch.segment(mesh, cone=cone)
+    chart = ch.segment(mesh, cone=cone, merge_cone=merge_cone)
     seconds["charts"] = time.perf_counter() - t0
     adj_csr = ch.face_csr(t)
     corner_uv = np.zeros((F.shape[0], 3, 2))
