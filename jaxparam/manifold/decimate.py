@@ -14,10 +14,10 @@ import numpy as np
 from ..errors import SolverError
 from ..mesh import TriMesh
 
-__all__ = ["decimate"]
+__all__ = ["decimate", "plane_quadrics"]
 
 
-def _plane_quadrics(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def plane_quadrics(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """``(n, 4, 4)``: the sum over each vertex's faces of the area-weighted plane quadrics."""
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     area2 = np.linalg.norm(n, axis=1)
@@ -45,7 +45,7 @@ def decimate(mesh: TriMesh, base_faces: int):
     F = np.array(t.faces, np.int64)
     n, m = V.shape[0], F.shape[0]
     scale = float(np.linalg.norm(np.ptp(V, axis=0)))
-    Q = _plane_quadrics(V, F)
+    Q = plane_quadrics(V, F)
     vf = [set() for _ in range(n)]
     for f, (a, b, c) in enumerate(F.tolist()):
         vf[a].add(f)

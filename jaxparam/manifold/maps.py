@@ -29,6 +29,7 @@ import numpy as np
 from .. import topology as topo
 from ..errors import SolverError
 from ..progress import progress
+from .decimate import plane_quadrics
 
 __all__ = ["maps_decimate", "MapsHistory"]
 
@@ -52,19 +53,6 @@ AREA_WEIGHT = 0.0
 
 #: Luby rounds per level (each adds collapses whose rings miss the ones already taken).
 ROUNDS = 4
-
-
-def _plane_quadrics(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """``(n, 4, 4)``: the sum over each vertex's faces of the area-weighted plane quadrics."""
-    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    area2 = np.linalg.norm(nrm, axis=1)
-    unit = nrm / np.maximum(area2, 1e-300)[:, None]
-    p = np.concatenate([unit, -np.sum(unit * V[F[:, 0]], 1, keepdims=True)], axis=1)
-    K = 0.5 * area2[:, None, None] * p[:, :, None] * p[:, None, :]
-    Q = np.zeros((V.shape[0], 4, 4))
-    for c in range(3):
-        np.add.at(Q, F[:, c], K)
-    return Q
 
 
 def _segment_ids(ptr: np.ndarray) -> np.ndarray:
@@ -318,7 +306,7 @@ def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, verbose=None
     F = np.array(F, np.int64)
     n, m = V.shape[0], F.shape[0]
     scale2 = float(np.sum(np.ptp(V, axis=0) ** 2))
-    Q = _plane_quadrics(V, F)
+    Q = plane_quadrics(V, F)
     alive_f = np.ones(m, bool)
     dead = np.zeros(n, bool)
     pf = np.empty(n, np.int64)
