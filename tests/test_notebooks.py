@@ -215,7 +215,8 @@ def test_notebook_runs(path, tmp_path):
 
 #: Notebooks stored executed, and how many figures each shows at least.  `make notebooks`
 #: executes all of them; add a notebook here once it is stored executed.
-STORED = {"01_convex_combination_maps": 12, "02_nonlinear_methods": 2}
+STORED = {"01_convex_combination_maps": 12, "02_nonlinear_methods": 2, "03_unorganized_points": 6,
+          "04_remeshing_and_wavelets": 2, "05_closed_meshes": 2, "06_optimize_through_the_map": 4}
 
 #: The largest stored notebook, in bytes: small enough to review.
 MAX_BYTES = 3_000_000
