@@ -1,8 +1,11 @@
 # Two set-up commands that work on a fresh machine with only Python 3.11:
 #   make demo   -> .venv, install, flatten a generated mesh, results in out/
-#   make test   -> .venv, install with test extras, run the test suite (slow tests and notebooks included)
+#   make test   -> .venv, install with test extras, run the suite CI runs: every test not marked
+#                  slow, then every notebook executed and its claims checked
 # and, once set up:
-#   make test-fast -> the suite without the tests marked slow (-m "not slow"; no notebooks)
+#   make test-all  -> everything, the tests marked slow included (the gradient grid, the sweeps
+#                     over ../shared/data, every notebook executed, the README examples run)
+#   make test-fast -> the suite without the tests marked slow (no notebooks executed)
 #   make notebooks -> execute every notebook in notebooks/ in place (figures kept, progress
 #                     output stripped), then check what each one claims
 #   make docs      -> build the documentation site into site/ (mkdocs --strict)
@@ -11,7 +14,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 
-.PHONY: demo test test-fast notebooks docs venv clean bench
+.PHONY: demo test test-all test-fast notebooks docs venv clean bench
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +28,10 @@ demo: venv
 	$(PY) -m jaxparam.demo --out out
 
 test: venv
+	$(PY) -m pytest -q -p no:cacheprovider -m "not slow" tests
+	$(PY) -m pytest -q -p no:cacheprovider -m slow tests/test_notebooks.py
+
+test-all: venv
 	$(PY) -m pytest -q -p no:cacheprovider tests
 
 test-fast: venv
