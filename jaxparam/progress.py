@@ -64,3 +64,33 @@ def write(message: str) -> None:
     from tqdm import tqdm as text_bar
 
     text_bar.write(message, file=sys.stderr)
+
+
+class StageBar:
+    """A :class:`~jaxparam.clock.StageClock`'s stages shown as one bar of ``total`` stages.
+
+    ``mark("name")`` closes the stage ``name`` on the clock (as ``clock("name")`` does, returning
+    its seconds) and advances the bar, naming the stage just done; :meth:`close` ends the bar.
+
+    Example::
+
+        clock = StageClock()
+        mark = StageBar(clock, total=3, desc="reconstruct_surface")
+        ...; mark("neighbours")
+        ...; mark("delaunay")
+        mark.close()
+    """
+
+    def __init__(self, clock: StageClock, *, total: int, desc: str, verbose: bool | None = None):
+        self._clock = clock
+        self._bar = progress(total=total, desc=desc, unit="stage", verbose=verbose)
+
+    def __call__(self, name: str) -> float:
+        seconds = self._clock(name)
+        self._bar.set_postfix_str(name, refresh=False)
+        self._bar.update(1)
+        return seconds
+
+    def close(self) -> None:
+        self._bar.close()
+

@@ -51,6 +51,7 @@ from .io import as_mesh
 from .optimize import minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
 from .triangles import barycentric, locate, signed_area2
+from .progress import progress
 
 __all__ = ["Remesh", "RemeshErrors", "remesh", "area_aware_map", "area_map_iters", "measure_errors",
            "default_samples", "base_domain", "refine_domain", "snap_boundary", "BoundaryCurve"]
@@ -196,7 +197,7 @@ def measure_errors(mesh: TriMesh, semi: Remesh, *, samples: int | None = None,
     samples = default_samples(mesh, semi) if samples is None else int(samples)
     cols = {"hausdorff_ab": [], "hausdorff_ba": [], "rms_ab": [], "rms_ba": []}
     d = None
-    for lv in range(semi.levels + 1):
+    for lv in progress(range(semi.levels + 1), desc="remesh errors", unit="level"):
         n = semi.hierarchy.counts[lv]
         d = surface_distance(V, mesh.faces, X[:n], semi.hierarchy.faces[lv], samples=samples,
                              seed=seed)
@@ -455,7 +456,7 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
     start = convex_map(mesh, weights=weights, boundary="circle")
     res = minimize(mesh, energy, init=start, free_boundary=False, solver="newton",
-                   max_iters=iters, verbose=False)
+                   max_iters=iters, verbose=None)      # a bar when it lasts (jp.config.progress)
     return res.uv
 
 

@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 
 from .. import topology as topo
 from ..clock import StageClock
+from ..progress import StageBar
 from ..errors import PointCloudError
 from ..memory import reuse_freed_memory
 from ..mesh import TriMesh
@@ -70,7 +71,8 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
                         symmetric: bool = True, gap: float = GAP, merge_duplicates: bool = False,
                         max_slope: float = MAX_SLOPE, bridge_factor: float = BRIDGE_FACTOR,
                         flip_rounds: int = FLIP_ROUNDS, outliers: bool = True,
-                        smooth: str | None = None, **unknown) -> Reconstruction:
+                        smooth: str | None = None, verbose: bool | None = None,
+                        **unknown) -> Reconstruction:
     """Triangulate unorganized points ``(N, 3)`` through their meshless parameterization (§8).
 
     The meshless map (:func:`~jaxparam.points.meshless_map`, whose options ``k``,
@@ -92,6 +94,9 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     ``"mls"`` (a weighted quadratic height field over each point's robust tangent plane,
     evaluated at the point) or ``"plane"`` (onto that plane); by default (``None``) the
     mesh's vertices are the input points, in their order.
+
+    ``verbose``: a progress bar over the stages (None: as ``jp.config.progress`` says; it
+    shows for runs longer than a second).
 
     **Returns:** a :class:`Reconstruction` (``rec.mesh``, ``rec.uv``, ``rec.boundary``,
     ``rec.points_used``, ``rec.seconds``).  Raises :class:`PointCloudError` for an option
@@ -118,12 +123,13 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
                             boundary=boundary, spacing=spacing, gap=gap, user_bnd=boundary_indices,
                             merge=merge_duplicates, max_slope=max_slope,
                             bridge_factor=bridge_factor, flip_rounds=flip_rounds,
-                            outliers=outliers, smooth=smooth)
+                            outliers=outliers, smooth=smooth, verbose=verbose)
 
 
 def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, gap, user_bnd, merge,
-                 max_slope, bridge_factor, flip_rounds, outliers, smooth) -> Reconstruction:
+                 max_slope, bridge_factor, flip_rounds, outliers, smooth, verbose) -> Reconstruction:
     clock = StageClock()
+    mark = StageBar(clock, total=6, desc="reconstruct_surface", verbose=verbose)
     P0, kept, index = check_points(points, k=k, merge_duplicates=merge, return_index=True)
     n_in = index.size
     merged = kept.size != n_in
@@ -167,10 +173,10 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
                                  max_slope=max_slope, names=kept[order],
                                  nearest=None if near is None else (dist, near),
                                  frames=None if near is None else frames)
-    clock("neighbours")
+    mark("neighbours")
     if user is None:
         bnd = detect_boundary(P, graph, gap=gap)
-        clock("boundary")
+        mark("boundary")
     else:
         bnd = where[user]
     cut_off = unreachable(graph, bnd)
@@ -183,13 +189,13 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
                                      frames=None if near is None else frames, exempt=cut_off)
     U = np.asarray(map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
                               symmetric=symmetric_solve(weights, symmetric, radius)))
-    clock("weights_and_solve")
+    mark("weights_and_solve")
     F = delaunay(U)
     F = F[np.argsort(F.min(axis=1), kind="stable")]     # faces in the points' (Morton) order too
-    clock("delaunay")
+    mark("delaunay")
     if flip_rounds:
         F = flip_towards_3d_delaunay(F, P, U, flip_rounds)
-        clock("flips")
+        mark("flips")
     too_long = long_faces(F, P, graph.spacing, bridge_factor)
     late = (lone_points(F, long_faces(F, P, graph.spacing, 2 * bridge_factor, np.min), len(P), bnd)
             if outliers else np.zeros(0, np.int64))
@@ -223,7 +229,8 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
         V0[order] = P
         V = V0[index]
     mesh = TriMesh(V, None, topology, uv=uv, validate=False, name="reconstruction")
-    clock("peel_and_topology")
+    mark("peel_and_topology")
+    mark.close()
     return Reconstruction(mesh=mesh, uv=uv, boundary=name[bnd],
                           points_used=np.flatnonzero(topology.referenced), seconds=clock.seconds,
                           outliers=np.sort(np.concatenate([kept[dropped], name[late]])))
