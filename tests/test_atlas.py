@@ -255,3 +255,14 @@ def test_closed_data_meshes(name):
     a = atlas(mesh)
     check_atlas(mesh, a, min_coverage=0.5)
     assert a.stats.max_aspect < 10
+
+
+def test_atlas_takes_a_trimesh_or_a_pair_and_refuses_other_types():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(1)
+    a = jp.atlas(sphere)
+    b = jp.atlas((np.asarray(sphere.vertices), np.asarray(sphere.faces)))
+    np.testing.assert_array_equal(a.uv_faces, b.uv_faces)
+    with pytest.raises(TypeError, match="atlas"):
+        jp.atlas({"vertices": sphere.vertices})

@@ -8,6 +8,7 @@ import numpy as np
 
 from .. import energies as en_mod
 from ..errors import MeshError, SolverError
+from ..io import as_mesh
 from ..mesh import TriMesh
 from . import charts as ch
 from . import flatten as fl
@@ -36,7 +37,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
 
     **Arguments:**
 
-    - ``mesh``: a :class:`~jaxparam.TriMesh` with concrete vertices.
+    - ``mesh``: a :class:`~jaxparam.TriMesh` (or a ``trimesh.Trimesh``, or a ``(V, F)`` pair)
+      with concrete vertices.
     - ``energy``: the distortion each chart's map minimizes (a name or ``jp.energy(f)``).
     - ``texture_size``: texels a side of the texture the atlas is packed for;
       ``margin_texels``: the least gap between two charts, in texels.
@@ -72,6 +74,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         a = jp.atlas(jp.load("bunny.off"))
         jp.save("bunny_atlas.obj", mesh, a.uv, uv_faces=a.uv_faces)
     """
+    mesh = as_mesh(mesh, "atlas")
     if isinstance(mesh.vertices, jax.core.Tracer):
         raise MeshError("atlas: the vertices are JAX tracers; the charts and the packing are "
                         "discrete choices made on concrete positions. Build the atlas from concrete "
