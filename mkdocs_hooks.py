@@ -20,7 +20,7 @@ BLOCK = re.compile(r"```python\n(.*?)```\n", flags=re.S)
 
 
 def _data() -> Path:
-    return Path(os.environ.get("JAXPARAM_DATA", ROOT.parent / "shared" / "data")).resolve()
+    return Path(os.environ.get("JAXPARAM_DATA") or ROOT.parent / "shared" / "data").resolve()
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
