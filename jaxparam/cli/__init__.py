@@ -58,25 +58,18 @@ def _add_commands(sub, only: str | None = None) -> None:
     """Every subcommand but ``batch``, or only the one named ``only``.  The modules that a
     subcommand's options mirror (the points, fitting, remesh, wavelet, manifold and atlas
     stacks) are imported only when its parser is built, so ``jaxparam flatten`` loads none."""
-    want = lambda name: only is None or only == name        # noqa: E731
-    if want("info"):
-        _add_info(sub)
-    if want("flatten"):
-        _add_flatten(sub)
-    if want("meshless"):
-        _add_meshless(sub)
-    if want("fit"):
-        _add_fit(sub)
-    if want("remesh"):
-        _add_remesh(sub)
-    if want("compress"):
-        _add_compress(sub)
-    if want("manifold"):
-        _add_manifold(sub)
-    if want("atlas"):
-        from .atlas import add_atlas_parser
+    adders = {"info": _add_info, "flatten": _add_flatten, "meshless": _add_meshless,
+              "fit": _add_fit, "remesh": _add_remesh, "compress": _add_compress,
+              "manifold": _add_manifold, "atlas": _add_atlas}
+    for name, add in adders.items():
+        if only is None or only == name:
+            add(sub)
 
-        add_atlas_parser(sub, _command)
+
+def _add_atlas(sub) -> None:
+    from .atlas import add_atlas_parser
+
+    add_atlas_parser(sub, _command)
 
 
 def _add_info(sub) -> None:
