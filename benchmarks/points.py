@@ -17,6 +17,11 @@ Usage::
 
     python benchmarks/points.py --sizes 10000 100000 1000000
     python benchmarks/points.py --peers [--n 20000]
+    python benchmarks/points.py --sweep [--n 20000]
+
+``--sweep`` prints jaxparam's own table over the same four meshes and five kinds of set
+(noise 0.1 and 0.2 % of the diagonal per axis, eightfold density, 1 % outliers, all of these),
+with the issue's goal checked per row.
 """
 from __future__ import annotations
 
@@ -60,8 +65,9 @@ PEER_MESHES = {"camelhead": "off", "lilium": "obj", "snail": "obj", "bump-domain
 
 def scan_set(name: str, kind: str, n: int, seed: int = 0):
     """``(points, V, F, diag, outliers)``: ``n`` area-weighted samples of a shared mesh;
-    ``kind`` is ``noise2`` (Gaussian, 0.2 % of the diagonal), ``dens8`` (density rising
-    eightfold along the longest axis) or ``all`` (both, plus 1 % outliers)."""
+    ``kind`` is ``noise1`` / ``noise2`` (Gaussian, 0.1 / 0.2 % of the diagonal per axis),
+    ``dens8`` (density rising eightfold along the longest axis), ``out1`` (1 % outliers on
+    clean samples) or ``all`` (0.2 % noise, eightfold density and 1 % outliers)."""
     import igl
     from pathlib import Path
 
@@ -77,10 +83,10 @@ def scan_set(name: str, kind: str, n: int, seed: int = 0):
         t = (P[:, ax] - V[:, ax].min()) / np.ptp(V[:, ax])
         P = P[rng.random(len(P)) < (1 + 7 * t) / 8]
     P = P[:n]
-    if kind in ("noise2", "all"):
-        P = P + rng.normal(0, 0.002 * diag, P.shape)
+    if kind in ("noise1", "noise2", "all"):
+        P = P + rng.normal(0, (0.001 if kind == "noise1" else 0.002) * diag, P.shape)
     out = np.zeros(0, np.int64)
-    if kind == "all":
+    if kind in ("all", "out1"):
         out = np.sort(rng.choice(n, n // 100, replace=False))
         base, amp, todo = P[out].copy(), diag * rng.uniform(0.02, 0.1, (out.size, 1)), np.arange(out.size)
         while todo.size:            # random directions, redrawn until >= 1.5 % of the diagonal off
@@ -221,13 +227,48 @@ def peer_table(n: int) -> None:
                     print(f"{name + ' ' + kind:>18s} {tool:>25s} failed: {str(exc)[:60]}", flush=True)
 
 
+SWEEP_KINDS = ("noise1", "noise2", "dens8", "out1", "all")
+
+
+def sweep_table(n: int) -> None:
+    """jaxparam alone, defaults, on every shared disk mesh of :data:`PEER_MESHES` and every
+    kind of :data:`SWEEP_KINDS`: the issue's goal columns (inliers used, loops, components,
+    flipped UV faces, both max distances, outliers found / planted / false)."""
+    import jaxparam as jp
+    print(f"{n} points per set; goal: used >= 0.99, 1 loop, 1 component, 0 flips, both distances <= 1 %")
+    print(f"{'set':>18s} {'seconds':>8s} {'used':>6s} {'loops':>6s} {'comps':>6s} {'flips':>6s} "
+          f"{'faces->surf %':>14s} {'surf->faces %':>14s} {'outliers f/p/false':>19s} {'goal':>5s}")
+    for name in PEER_MESHES:
+        for kind in SWEEP_KINDS:
+            P, V, F, diag, out = scan_set(name, kind, n)
+            t = time.perf_counter()
+            rec = jp.reconstruct_surface(P, verbose=False)
+            sec = time.perf_counter() - t
+            FR = np.asarray(rec.mesh.faces)
+            inl = np.setdiff1d(np.arange(n), out)
+            used = np.isin(inl, rec.points_used).mean()
+            _, loops, comps, d1, d2 = mesh_stats(P, np.asarray(rec.mesh.vertices), FR, V, F, diag)
+            flips = int(jp.distortion(rec.mesh, rec.uv).flips)
+            found = int(np.isin(out, rec.outliers).sum())
+            false = int(np.setdiff1d(rec.outliers, out).size)
+            ok = used >= 0.99 and loops == 1 and comps == 1 and flips == 0 and max(d1, d2) <= 1.0
+            print(f"{name + ' ' + kind:>18s} {sec:8.1f} {used:6.3f} {loops:6d} {comps:6d} {flips:6d} "
+                  f"{d1:14.2f} {d2:14.2f} {f'{found}/{out.size}/{false}':>19s} {'yes' if ok else 'NO':>5s}",
+                  flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", type=int, nargs="*", default=[10_000, 100_000, 1_000_000])
     ap.add_argument("--one", type=int, help=argparse.SUPPRESS)
     ap.add_argument("--peers", action="store_true", help="the peer table on scan-like sets")
+    ap.add_argument("--sweep", action="store_true",
+                    help="jaxparam on every shared disk mesh x noise 0.1/0.2 %%, 8x density, 1 %% outliers")
     ap.add_argument("--n", type=int, default=20_000, help="points per set of the peer table")
     args = ap.parse_args()
+    if args.sweep:
+        sweep_table(args.n)
+        return 0
     if args.peers:
         peer_table(args.n)
         return 0

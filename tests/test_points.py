@@ -327,19 +327,30 @@ def test_camelhead_points_dropping_steep_pairs_brings_faces_to_the_surface():
 
 
 def test_an_ear_over_a_missed_boundary_point_is_peeled():
-    # A 21 x 21 grid whose top-middle point sits in a shallow notch: the Delaunay hull bridges
-    # the notch with one face whose apex angle (~136 degrees) covers empty space.
+    # A 21 x 21 grid whose top-middle point sits in a notch of a densely sampled boundary (two
+    # extra points halve the top row's spacing there): the Delaunay hull bridges the notch with
+    # one face whose apex angle (~102 degrees) covers empty space, on a base of one spacing.
     g = np.linspace(0, 1, 21)
     xy = np.column_stack([a.ravel() for a in np.meshgrid(g, g)])
+    xy = np.vstack([xy, [[0.475, 1.0], [0.525, 1.0]]])
     apex = int(np.flatnonzero(np.all(np.isclose(xy, [0.5, 1.0]), axis=1))[0])
     xy[apex] = [0.5, 0.98]
     P = np.column_stack([xy, 0.1 * np.sin(3 * xy[:, 0])])
     F = delaunay(xy)
-    G = peel_ears(F, P, PT.point_graph(P, 10))
+    graph = PT.point_graph(P, 10)
+    G = peel_ears(F, P, graph)
     gone = {tuple(f) for f in np.sort(F, 1).tolist()} - {tuple(f) for f in np.sort(G, 1).tolist()}
     assert len(gone) == 1 and apex in next(iter(gone))
     t = jp.TriMesh(P, G).topology
     assert t.is_disk and apex in t.boundary_loops[0]
+    # Without the two extra points the ear's base is two spacings: a sparse boundary, whose
+    # face covers the surface (the square), so it stays; allowing long bases peels it.
+    xy2 = np.delete(xy, [len(xy) - 2, len(xy) - 1], axis=0)
+    P2 = np.column_stack([xy2, 0.1 * np.sin(3 * xy2[:, 0])])
+    F2 = delaunay(xy2)
+    graph2 = PT.point_graph(P2, 10)
+    assert len(peel_ears(F2, P2, graph2)) == len(F2)
+    assert len(peel_ears(F2, P2, graph2, max_base=np.inf)) == len(F2) - 1
 
 
 def test_a_user_boundary_survives_merging_duplicates(surface_points):

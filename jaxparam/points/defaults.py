@@ -10,7 +10,7 @@ import math
 
 __all__ = ["K", "K_DETECT", "K_FRAME", "GAP", "MAX_SLOPE", "MIN_NORMAL_DOT", "BRIDGE_FACTOR", "FLIP_ROUNDS",
            "OUTLIER_SCALE", "OUTLIER_HEIGHT", "OUTLIER_ISOLATION",
-           "OUTLIER_ROUNDS"]
+           "OUTLIER_ROUNDS", "EAR_MAX_BASE"]
 
 #: Nearest neighbours per point in the map's fans (survey §8's ``k``).
 K = 10
@@ -56,3 +56,8 @@ OUTLIER_ISOLATION = 2.5
 #: Rounds of the outlier test (each on the points the previous one kept: outliers close to
 #: each other inflate each other's neighbourhoods in the first).
 OUTLIER_ROUNDS = 2
+
+#: An ear (a boundary face over a notch whose apex the detection missed) is peeled only when
+#: its boundary edge is at most this many of the apex's spacings: longer, the boundary is
+#: sparse there and the face covers the surface.
+EAR_MAX_BASE = 1.1

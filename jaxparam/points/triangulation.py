@@ -12,6 +12,7 @@ from .. import topology as topo
 from ..errors import PointCloudError
 from ..topology import half_edge_twins
 from ..triangles import corner_angle, face_angles, orient
+from .defaults import EAR_MAX_BASE
 from .graph import PointGraph
 
 __all__ = ["delaunay", "flip_towards_3d_delaunay", "long_faces", "lone_points", "outside_bridges",
@@ -115,7 +116,7 @@ def flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds
 
 
 def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: float = 0.45 * np.pi,
-              rounds: int = 3) -> np.ndarray:
+              rounds: int = 3, max_base: float = EAR_MAX_BASE) -> np.ndarray:
     """Remove boundary "ears" that cover empty space: a face ``(b1, b2, p)`` whose edge
     ``b1-b2`` is on the boundary and whose third vertex ``p`` is not, when none of ``p``'s
     neighbours in ``graph`` lies inside the face's angle at ``p`` (seen in ``p``'s tangent
@@ -123,7 +124,14 @@ def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: flo
     angles near 45 or 60 degrees; on camelhead.xyz exactly the three ears reach 81).  Such
     a face spans a concave notch of the boundary whose point ``p`` the boundary detection
     missed; peeling it puts ``p`` on the boundary.  Each round peels faces with no vertex in
-    common, so the result stays a manifold disk.  **Returns:** the faces kept, in order."""
+    common, so the result stays a manifold disk.
+
+    Only ears whose boundary edge ``b1-b2`` is at most ``max_base`` times ``p``'s spacing
+    are peeled: a densely sampled boundary with a point far inside is a notch of the surface
+    (camelhead.xyz's three: 0.81-1.03), while a longer base is a sparse boundary whose
+    triangle covers the surface (on 20k-point sets with eightfold density, peeling those left
+    the source up to 1.9 % of the diagonal from the faces instead of 1.3 %).
+    **Returns:** the faces kept, in order."""
     n, m = len(P), len(F)
     deg = np.diff(graph.indptr)
     src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
@@ -162,7 +170,8 @@ def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: flo
         rel = np.mod(angle(near) - start[:, None], 2 * np.pi)
         others = (near != b1[:, None]) & (near != b2[:, None])
         inside = others & (rel > 1e-6) & (rel < width[:, None] - 1e-6)
-        ear = np.flatnonzero((width >= min_angle) & ~inside.any(axis=1))
+        short = np.linalg.norm(P[b1] - P[b2], axis=1) <= max_base * graph.spacing[p]
+        ear = np.flatnonzero((width >= min_angle) & ~inside.any(axis=1) & short)
         if ear.size == 0:
             break
         # Independent: no two peeled faces share a vertex in this round.
