@@ -8,7 +8,10 @@ other, ``--repeat`` times):
 - **in process**: the first and the second call inside one process, for the default JAX path
   and for ``host=True`` (NumPy weights and assembly, no tracing; what ``jaxparam flatten`` uses).
 
-Jobs: ``jaxparam flatten MESH -o x.obj`` against a libigl script that loads the mesh, maps the
+Jobs: ``jaxparam flatten MESH -o x.obj`` (shape-preserving weights, the default), with
+``--weights harmonic`` (the libigl script's weights) and with ``--energy symmetric-dirichlet
+--free-boundary`` (Newton: the JAX path, where the compilation cache matters) against a libigl
+script that loads the mesh, maps the
 boundary to a circle, solves the harmonic map and writes an OBJ with UVs; and ``import
 jaxparam`` against ``import jax``.  Then the number of XLA compilations that ``convex_map``
 needs over the disk meshes of ``../shared/data`` in one process (shape bucketing shares them).
@@ -17,12 +20,14 @@ Usage::
 
     python benchmarks/startup.py                      # camelhead, 5 paired runs
     python benchmarks/startup.py --mesh M.off --repeat 3
+    python benchmarks/startup.py --heldout --skip-in-process   # + lilium refined (26k faces)
 """
 from __future__ import annotations
 
 import argparse
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -55,6 +60,16 @@ mesh = jp.load(sys.argv[1])
 t = time.perf_counter(); jp.convex_map(mesh, host=host); print(first, time.perf_counter() - t)
 '''
 
+IN_PROCESS_MIN = r'''
+import sys, time, jaxparam as jp
+mesh = jp.load(sys.argv[1])
+uv = jp.convex_map(mesh, host=True)
+kw = dict(init=uv, free_boundary=True, verbose=False)
+t = time.perf_counter(); r = jp.minimize(mesh, "symmetric_dirichlet", **kw); first = time.perf_counter() - t
+t = time.perf_counter(); jp.minimize(mesh, "symmetric_dirichlet", **kw)
+print(first, time.perf_counter() - t, r.iterations)
+'''
+
 COMPILES = r'''
 import sys, jax, jaxparam as jp
 count = [0]
@@ -71,46 +86,93 @@ for path in sys.argv[1:]:
 '''
 
 
-def timed(cmd, env=None) -> float:
+def timed(cmd, env=None) -> tuple[float, float]:
+    """``(wall seconds, CPU seconds)`` of one run of ``cmd``: the CPU time (user + system, all
+    threads) is what a loaded machine inflates least."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run(cmd, check=True, capture_output=True, env={**os.environ, **(env or {})})
-    return time.perf_counter() - t
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def heldout_mesh(folder: str) -> str:
+    """lilium refined once (26,360 faces): a mesh not in ``../shared/data``, written as OFF."""
+    path = f"{folder}/lilium_r1.off"
+    subprocess.run([PY, "-c", "import sys, jaxparam as jp; jp.save(sys.argv[2], jp.shapes.refine("
+                    "jp.load(sys.argv[1]), 1))", str(MESHES / "lilium.obj"), path], check=True)
+    return path
+
+
+def whole_process(mesh: str, repeat: int, out: str) -> dict:
+    """Median seconds of each job, cold and warm cache, over ``repeat`` paired rounds."""
+    jobs = {
+        "jaxparam flatten": lambda: [JAXPARAM, "flatten", mesh, "-o", f"{out}/jp.obj"],
+        "jaxparam flatten --weights harmonic": lambda: [JAXPARAM, "flatten", mesh, "-o",
+                                                       f"{out}/jph.obj", "--weights", "harmonic"],
+        "jaxparam flatten --energy sd --free": lambda: [
+            JAXPARAM, "flatten", mesh, "-o", f"{out}/jpe.obj", "--energy", "symmetric-dirichlet",
+            "--free-boundary"],
+        "libigl script": lambda: [PY, "-c", IGL_SCRIPT, mesh, f"{out}/igl.obj"],
+        "import jaxparam": lambda: [PY, "-c", "import jaxparam"],
+        "import jax": lambda: [PY, "-c", "import jax"],
+    }
+    rows = {k: {"cold": [], "warm": [], "warm cpu": []} for k in jobs}
+    for r in range(repeat):
+        cache = tempfile.mkdtemp()
+        env = {"JAXPARAM_CACHE": cache, "JAXPARAM_PROGRESS": "0"}
+        for col in ("cold", "warm"):
+            for k, cmd in jobs.items():
+                wall, cpu = timed(cmd(), env)
+                rows[k][col].append(wall)
+                if col == "warm":
+                    rows[k]["warm cpu"].append(cpu)
+    return {k: {c: statistics.median(v) for c, v in cols.items()} for k, cols in rows.items()}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--mesh", default=str(MESHES / "camelhead.off"))
+    ap.add_argument("--mesh", nargs="*", default=[str(MESHES / "camelhead.off")])
+    ap.add_argument("--heldout", action="store_true",
+                    help="also lilium refined once (26k faces, not in ../shared/data)")
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--skip-in-process", action="store_true",
+                    help="only the whole-process table")
     args = ap.parse_args()
     out = tempfile.mkdtemp()
+    meshes = list(args.mesh) + ([heldout_mesh(out)] if args.heldout else [])
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}; python {platform.python_version()}")
-    rows = {"jaxparam flatten": {"cold": [], "warm": []}, "libigl script": {"cold": [], "warm": []},
-            "import jaxparam": {"cold": [], "warm": []}, "import jax": {"cold": [], "warm": []}}
-    for r in range(args.repeat):
-        cache = tempfile.mkdtemp()
-        env = {"JAXPARAM_CACHE": cache, "JAXPARAM_PROGRESS": "0"}
-        for col in ("cold", "warm"):
-            rows["jaxparam flatten"][col].append(
-                timed([JAXPARAM, "flatten", args.mesh, "-o", f"{out}/jp.obj"], env))
-            rows["libigl script"][col].append(
-                timed([PY, "-c", IGL_SCRIPT, args.mesh, f"{out}/igl.obj"]))
-            rows["import jaxparam"][col].append(timed([PY, "-c", "import jaxparam"], env))
-            rows["import jax"][col].append(timed([PY, "-c", "import jax"]))
-    inproc = {path: subprocess.run([PY, "-c", IN_PROCESS, args.mesh, path], check=True,
+    for mesh in meshes:
+        med = whole_process(mesh, args.repeat, out)
+        print(f"\nwhole process on {Path(mesh).name}, median of {args.repeat} paired runs (s), "
+              f"load {os.getloadavg()[0]:.1f}")
+        print(f"{'job':<36} {'cold':>7} {'warm cache':>11} {'warm, CPU s':>12}")
+        for k, cols in med.items():
+            print(f"{k:<36} {cols['cold']:>7.2f} {cols['warm']:>11.2f} {cols['warm cpu']:>12.2f}")
+        for k in ("jaxparam flatten", "jaxparam flatten --weights harmonic"):
+            ratio = med[k]["warm"] / med["libigl script"]["warm"]
+            cpu = med[k]["warm cpu"] / med["libigl script"]["warm cpu"]
+            print(f"{k} / libigl script, warm cache: {ratio:.2f} wall, {cpu:.2f} CPU "
+                  "(goal <= 1.5)")
+    if args.skip_in_process:
+        return
+    mesh = meshes[0]
+    inproc = {path: subprocess.run([PY, "-c", IN_PROCESS, mesh, path], check=True,
                                    capture_output=True, text=True,
                                    env={**os.environ, "JAXPARAM_PROGRESS": "0"}).stdout.split()
               for path in ("jax", "host")}
-    med = {k: {c: statistics.median(v) for c, v in cols.items()} for k, cols in rows.items()}
-    print(f"\nwhole process on {Path(args.mesh).name}, median of {args.repeat} paired runs (s)")
-    print(f"{'job':<18} {'cold':>7} {'warm cache':>11}")
-    for k, cols in med.items():
-        print(f"{k:<18} {cols['cold']:>7.2f} {cols['warm']:>11.2f}")
-    ratio = med["jaxparam flatten"]["warm"] / med["libigl script"]["warm"]
-    print(f"flatten / libigl script, warm cache: {ratio:.2f} (goal <= 1.5)")
     for path, (first, again) in inproc.items():
         print(f"convex_map in process, {path + ' path:':<10} first call {float(first):.3f} s, "
               f"second {float(again):.3f} s")
+    for col in ("cold", "warm"):
+        cache = tempfile.mkdtemp() if col == "cold" else cache
+        first, again, its = subprocess.run(
+            [PY, "-c", IN_PROCESS_MIN, mesh], check=True, capture_output=True, text=True,
+            env={**os.environ, "JAXPARAM_PROGRESS": "0", "JAXPARAM_CACHE": cache}).stdout.split()
+        print(f"minimize(symmetric_dirichlet, free_boundary) in process, {col} cache: first call "
+              f"{float(first):.2f} s, second {float(again):.2f} s ({its} newton iterations)")
     disks = [str(MESHES / n) for n in ("camelhead.off", "camel_b.obj", "lilium.obj", "snail.obj",
                                         "bump-domain.obj", "grid.off", "planexy.off", "halftunnel.off")
              if (MESHES / n).exists()]

@@ -9,8 +9,11 @@ It also turns on JAX's persistent compilation cache in the user's cache folder, 
 process reuses compiled kernels (``JAXPARAM_CACHE`` moves it, ``JAXPARAM_CACHE=off`` turns it
 off; ``jp.config.compile_cache`` changes it at run time).
 
-Submodules and functions load on first use (PEP 562), so ``import jaxparam`` costs little
-more than ``import jax``; ``jp.convex_map`` imports the linear-map stack when first touched.
+``import jaxparam`` does not import JAX itself: both settings are applied when JAX loads,
+whoever imports it (an import hook, :func:`jaxparam.lazy_jax.when_jax_loads`), or at once
+when it is already loaded.  Submodules and functions load on first use (PEP 562), and the
+NumPy paths (``jp.load``, ``jp.convex_map(..., host=True)``, ``jp.distortion``, ``jaxparam
+flatten`` with a linear method) run without JAX ever loading.
 
 Example::
 
@@ -23,17 +26,16 @@ import importlib as _importlib
 import sys as _sys
 import types as _types
 
-import jax as _jax
-
-_jax.config.update("jax_enable_x64", True)
-
-from .errors import (  # noqa: E402  (cheap: no numpy)
+from .errors import (  # cheap: no numpy
     DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
     PointCloudError, SolverError, TopologyError,
 )
-from .settings import config  # noqa: E402
+from .lazy_jax import when_jax_loads as _when_jax_loads
+from .settings import config, configure_jax as _configure_jax
 
-config.apply_compile_cache()
+# float64 and the compilation cache, now if JAX is loaded, else the moment anything imports it
+# (jaxparam's own modules or the user's ``import jax``): importing jaxparam imports no JAX.
+_when_jax_loads(_configure_jax)
 
 __version__ = "0.1.0"
 

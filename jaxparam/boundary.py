@@ -14,10 +14,9 @@ checked).
 """
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import tol
 from .errors import MeshError, first_few
 from .geometry import safe_norm

@@ -22,10 +22,9 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import sparse
 
 __all__ = ["CombinationSystem", "combination_system", "assemble", "solve", "scatter",

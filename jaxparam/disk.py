@@ -7,10 +7,9 @@ Used by :mod:`jaxparam.linear`, :mod:`jaxparam.optimize`, :mod:`jaxparam.remesh`
 """
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import topology as topo
 from .errors import TopologyError, first_few
 from .mesh import TriMesh

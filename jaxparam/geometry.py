@@ -8,8 +8,7 @@ norms are "safe" (the double-``where`` trick) so a degenerate triangle gives
 """
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 
 from . import tol
 

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import functools
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import boundary as bmap
 from . import combination as comb
 from . import host as _host
@@ -97,7 +96,8 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
     spacing = choose(spacing, bmap.SPACINGS, what="spacing", where=where)
     work, added = fill_holes(mesh)
     t = work.topology
-    V = jnp.asarray(work.vertices, dtype=jnp.float64)
+    V = (work.vertices if host and isinstance(work.vertices, np.ndarray)   # no JAX on the host path
+         else jnp.asarray(work.vertices, dtype=jnp.float64))
     loop = t.boundary_loops[0]
     shape, user_uv = _boundary_key(bmap.in_loop_order(boundary, loop), loop.size)
     if shape == "plane":

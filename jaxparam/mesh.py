@@ -15,10 +15,9 @@ instead.
 """
 from __future__ import annotations
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import tol
 from . import topology as topo
 from .errors import DegenerateFaceError, MeshError, first_few

@@ -14,10 +14,9 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import boundary as bmap
 from . import geometry as geo
 from . import host

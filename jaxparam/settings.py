@@ -14,14 +14,21 @@
     shorter than 0.2 s are not stored (JAX's own ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``
     changes that); delete the folder to empty it.
 
-This module imports nothing from jaxparam, so every layer may read it.
+``import jaxparam`` does not import JAX (issue 17): :func:`configure_jax` (float64 and the
+compilation cache) runs the moment JAX loads, whoever imports it, through
+:func:`jaxparam.lazy_jax.when_jax_loads`.
+
+
+This module imports only :mod:`jaxparam.lazy_jax` (no JAX), so every layer may read it.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-__all__ = ["Settings", "config", "env_flag", "default_compile_cache"]
+from .lazy_jax import jax_loaded
+
+__all__ = ["Settings", "config", "env_flag", "default_compile_cache", "configure_jax"]
 
 _FALSE = {"0", "false", "no", "off", ""}
 
@@ -70,7 +77,10 @@ class Settings:
         self.apply_compile_cache()
 
     def apply_compile_cache(self) -> None:
-        """Hand :attr:`compile_cache` to JAX (on, in that folder; or off)."""
+        """Hand :attr:`compile_cache` to JAX (on, in that folder; or off); before JAX has
+        loaded, nothing (:func:`configure_jax` applies it at the load)."""
+        if not jax_loaded():
+            return
         import jax
 
         try:
@@ -107,3 +117,10 @@ def default_compile_cache() -> str | None:
 
 #: The one settings object of the library, exported as ``jp.config``.
 config = Settings()
+
+
+def configure_jax(jax) -> None:
+    """What ``import jaxparam`` sets in JAX: float64 (``jax_enable_x64``) and the persistent
+    compilation cache (:attr:`Settings.compile_cache`)."""
+    jax.config.update("jax_enable_x64", True)
+    config.apply_compile_cache()

@@ -23,12 +23,12 @@ per vertex, the coefficients of eq. (3).
 from __future__ import annotations
 
 import functools
+import hashlib
 from dataclasses import dataclass
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from .options import choose
 from .errors import MeshError
 from .geometry import safe_norm
@@ -269,11 +269,27 @@ def entry_weights(vertices, topology, kind: str, *, host: bool = False):
     return w, kind in SYMMETRIC_KINDS
 
 
+#: The last host weights computed, by (topology, kind, digest of the vertices): a report's
+#: Theorem 1 check after a map reuses the map's weights (issue 17).
+_HOST_MEMO: dict = {}
+
+
 def host_entry_weights(vertices, topology, kind: str) -> np.ndarray:
     """:func:`entry_weights`' values in NumPy for concrete ``vertices (n, 3)``: ``(k,)``
-    float64 in :func:`ring_entries` order (the twin of the JAX kernel, :mod:`jaxparam.host`)."""
+    float64 in :func:`ring_entries` order (the twin of the JAX kernel, :mod:`jaxparam.host`).
+    The last two results are kept, keyed by a digest of the vertices (a fresh copy is
+    returned each time)."""
+    V = np.ascontiguousarray(vertices, np.float64)
+    key = (topology, kind, hashlib.blake2b(V.tobytes(), digest_size=16).digest())
+    if key not in _HOST_MEMO:
+        if len(_HOST_MEMO) >= 2:
+            _HOST_MEMO.pop(next(iter(_HOST_MEMO)))
+        _HOST_MEMO[key] = _host_entry_weights(V, topology, kind)
+    return _HOST_MEMO[key].copy()
+
+
+def _host_entry_weights(V: np.ndarray, topology, kind: str) -> np.ndarray:
     R = ring_entries(topology)
-    V = np.asarray(vertices, np.float64)
     angle, cot, length = _host.corner_geometry(V, topology.faces)
     if kind == "harmonic":
         wg, pw = R.wedge, R.prev_wedge

@@ -277,3 +277,16 @@ def test_flatten_writes_the_format_the_extension_names(mesh_file, tmp_path, ext)
     mine = jp.load(out)
     assert t.visual.uv is not None
     np.testing.assert_allclose(np.asarray(t.visual.uv), np.asarray(mine.uv), atol=1e-6)
+
+
+def test_flatten_repeats_the_minimize_defaults_that_its_parser_shows():
+    # The parser reads --solver's and --max-iters' defaults from flatten_mesh, so that a
+    # linear flatten imports no optimizer (issue 17): they must stay minimize's.
+    from jaxparam.cli.pipeline import flatten_mesh
+    from jaxparam.options import default_of
+
+    for name in ("solver", "max_iters"):
+        assert default_of(flatten_mesh, name) == default_of(jp.minimize, name)
+    args = __import__("jaxparam.cli", fromlist=["build_parser"]).build_parser("flatten").parse_args(
+        ["flatten", "m.off", "-o", "x.obj"])
+    assert (args.solver, args.max_iters, args.energy) == ("newton", 200, None)

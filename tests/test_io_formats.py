@@ -295,3 +295,63 @@ def test_per_corner_uvs_read_by_trimesh(tmp_path, mesh_uv, ext):
     assert len(t.faces) == mesh.n_faces
     close(np.asarray(t.vertices)[t.faces], np.asarray(mesh.vertices)[mesh.faces], ext)
     close(np.asarray(t.visual.uv)[t.faces], tex[T], ext)
+
+
+def _line_by_line_off(path, monkeypatch):
+    from jaxparam.io import off
+
+    with monkeypatch.context() as m:
+        m.setattr(off, "fast_off", lambda text: None)
+        return off.read_off(path)
+
+
+@pytest.mark.parametrize("body, fast", [
+    ("OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", True),
+    ("OFF\n# a comment\n4 2 0\n\n0 0 0  # origin\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", True),
+    ("OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n", False),            # a quad
+    ("OFF\n4 2 0\n0 0 0 9\n1 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", False),     # same total
+    ("OFF 4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", False),      # counts on line 1
+    ("OFF\n4 2 0\n0 0 0 1 1 1\n1 0 0 1 1 1\n1 1 0 1 1 1\n0 1 0 1 1 1\n3 0 1 2\n3 0 2 3\n", False),
+])
+def test_the_vectorized_off_reader_equals_the_line_reader(tmp_path, monkeypatch, body, fast):
+    from jaxparam.io import off
+    from jaxparam.io.files import read_text
+
+    path = tmp_path / "m.off"
+    path.write_text(body)
+    assert (off.fast_off(read_text(path)) is not None) == fast
+    if "1 0\n1 1 0" in body:            # a two-number vertex line: both refuse it, naming line 4
+        for read in (off.read_off, lambda p: _line_by_line_off(p, monkeypatch)):
+            with pytest.raises(MeshFileError, match="line 4"):
+                read(path)
+        return
+    V, F = off.read_off(path)
+    V2, F2 = _line_by_line_off(path, monkeypatch)
+    assert np.array_equal(V, V2) and np.array_equal(F, F2) and F.dtype == np.int64
+
+
+def test_an_out_of_range_index_is_still_named_with_its_line(tmp_path):
+    path = tmp_path / "m.off"
+    path.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")
+    with pytest.raises(MeshFileError, match="line 6: vertex index 7 is out of range"):
+        io.read_off(path)
+
+
+def test_written_rows_equal_savetxt_digit_for_digit():
+    import io as pyio
+
+    from jaxparam.io.files import write_rows
+
+    rng = np.random.default_rng(3)
+    X = np.concatenate([rng.normal(size=(70001, 3)) * 10.0 ** rng.integers(-300, 300, (70001, 1)),
+                        [[np.pi, -0.0, 1e-320]]])
+    a, b = pyio.StringIO(), pyio.StringIO()
+    write_rows(a, "v %.17g %.17g %.17g\n", X)
+    np.savetxt(b, X, fmt="v %.17g %.17g %.17g")
+    assert a.getvalue() == b.getvalue()
+    F = rng.integers(0, 10 ** 9, (1000, 6))
+    a, b = pyio.StringIO(), pyio.StringIO()
+    write_rows(a, "f %d/%d %d/%d %d/%d\n", F)
+    np.savetxt(b, F, fmt="f %d/%d %d/%d %d/%d")
+    assert a.getvalue() == b.getvalue()
+    assert np.array_equal(np.loadtxt(pyio.StringIO(a.getvalue().replace("f ", "").replace("/", " "))), F)

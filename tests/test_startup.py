@@ -1,14 +1,17 @@
-"""What ``import jaxparam`` costs and sets up: lazy submodules, the persistent compilation cache."""
+"""What ``import jaxparam`` costs and sets up: no JAX until something needs it (then float64
+and the persistent compilation cache, whoever imports JAX), lazy submodules, and a linear
+``jaxparam flatten`` that never loads JAX (issue 17)."""
 import json
 import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import jaxparam as jp
 
-HEAVY = ("scipy.sparse", "scipy.spatial", "matplotlib", "trimesh", "equinox", "optimistix",
+HEAVY = ("jax", "jaxlib", "scipy.sparse", "scipy.spatial", "matplotlib", "trimesh", "equinox", "optimistix",
          "jaxparam.linear", "jaxparam.points", "jaxparam.manifold", "jaxparam.optimize")
 
 
@@ -60,3 +63,49 @@ def test_the_cache_can_be_turned_off(tmp_path):
                              " jax.config.jax_enable_compilation_cache]))",
                              JAXPARAM_CACHE="off"))
     assert off == [None, False]
+
+
+def test_importing_jaxparam_turns_on_float64_and_the_cache_for_jax_imported_after_or_before(tmp_path):
+    code = ("import json, sys{first}; import jaxparam as jp; loaded = 'jax' in sys.modules;"
+            "import jax, jax.numpy as jnp;"
+            "print(json.dumps([loaded, str(jnp.ones(2).dtype), jax.config.jax_enable_x64,"
+            " jax.config.jax_compilation_cache_dir]))")
+    cache = str(tmp_path / "c")
+    assert json.loads(_python(code.format(first=""), JAXPARAM_CACHE=cache)) == [
+        False, "float64", True, cache]
+    assert json.loads(_python(code.format(first="; import jax"), JAXPARAM_CACHE=cache)) == [
+        True, "float64", True, cache]
+
+
+def test_kernels_defined_before_jax_loads_work_after(tmp_path):
+    # TriMesh (a pytree registered when JAX loads) and a jitted library kernel, both touched
+    # before any JAX import: under jax.jit and with .lower like any jitted function.
+    out = json.loads(_python(
+        "import json, sys, numpy as np, jaxparam as jp;"
+        "from jaxparam import combination as comb;"
+        "m = jp.TriMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0]]), [[0, 1, 2]]);"
+        "before = 'jax' in sys.modules;"
+        "import jax;"
+        "s = jax.jit(lambda mm: mm.vertices.sum())(m);"
+        "x = comb.scatter(np.ones((1, 2)), np.zeros((2, 2)), np.array([0]), np.array([1, 2]), n=3);"
+        "low = comb.scatter.lower(np.ones((1, 2)), np.zeros((2, 2)), np.array([0]),"
+        " np.array([1, 2]), n=3) is not None;"
+        "print(json.dumps([before, float(s), str(x.dtype), np.asarray(x).tolist(), low,"
+        " comb.scatter.__name__]))"))
+    assert out == [False, 2.0, "float64", [[1, 1], [0, 0], [0, 0]], True, "scatter"]
+
+
+def test_a_linear_flatten_loads_no_jax(tmp_path):
+    mesh = jp.shapes.disk(6, seed=1, height=0.2)
+    src = tmp_path / "d.off"
+    jp.save(src, mesh)
+    run = ("import json, sys; from jaxparam.cli import main;"
+           "rc = main(['flatten', {src!r}, '-o', {out!r}, '-q'{more}]);"
+           "print(json.dumps([rc] + [m in sys.modules for m in ('jax', 'equinox', 'optimistix')]))")
+    out = tmp_path / "d.obj"
+    assert json.loads(_python(run.format(src=str(src), out=str(out), more=""))) == [
+        0, False, False, False]
+    uv = jp.load(out).uv
+    ref = jp.convex_map(mesh)                       # the JAX path, in this process
+    assert np.max(np.abs(uv - np.asarray(ref))) < 1e-12
+    # (tests/test_cli.py runs flatten with --energy, which loads JAX.)

@@ -15,12 +15,10 @@ from typing import Any, Callable, Iterable
 
 from .. import boundary as bmap
 from .. import weights as wts
-from ..energies import ENERGIES
 from ..linear import convex_map
-from ..optimize import SOLVERS, minimize
 from ..options import choose, default_of, hyphenated
 
-from .pipeline import FLATTEN_OPTIONS
+from .pipeline import FLATTEN_OPTIONS, flatten_mesh
 
 __all__ = ["Named", "add_named", "add_mirrored", "add_flatten_options", "flatten_options",
            "EXAMPLES", "HelpFormatter", "version", "subparser"]
@@ -45,7 +43,22 @@ EXAMPLES = {
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
     """Help that keeps the examples' line breaks and shows every option's default (options
-    without one, and flags, show none)."""
+    without one, and flags, show none).  A :class:`Named` option shows its choices as
+    ``{a,b,c}``, read only when help or a usage message is printed."""
+
+    _printing = False       # add_argument formats an option's metavar too: resolve none then
+
+    def format_help(self) -> str:
+        self._printing = True
+        return super().format_help()
+
+    def _metavar_formatter(self, action, default_metavar):
+        if action.metavar is None and isinstance(action.type, Named) and (
+                self._printing or action.type.resolved):
+            return super()._metavar_formatter(
+                argparse.Action(action.option_strings, action.dest, metavar=action.type.metavar),
+                default_metavar)
+        return super()._metavar_formatter(action, default_metavar)
 
     def _get_help_string(self, action):
         text = action.help or ""
@@ -78,19 +91,37 @@ def subparser(sub, name: str, help: str, **kwargs) -> argparse.ArgumentParser:
 class Named:
     """An argparse ``type=`` that accepts one of ``choices`` in either spelling.
 
-    **Arguments:** ``choices`` the valid names (canonical or hyphenated); ``what`` the
-    option's name in the error message (``"weights"``).
+    **Arguments:** ``choices`` the valid names (canonical or hyphenated), or a function
+    returning them, called on first use (so that ``--energy``'s names load the energies
+    only when the option is given or help is shown); ``what`` the option's name in the error
+    message (``"weights"``).
 
     Calling it with a string returns the hyphenated spelling, or raises
     :class:`argparse.ArgumentTypeError` (a usage error, exit 2) listing the choices.
     """
 
-    def __init__(self, choices: Iterable[str], what: str):
-        self.choices = tuple(hyphenated(c) for c in choices)
+    def __init__(self, choices: Iterable[str] | Callable[[], Iterable[str]], what: str, *,
+                 default: str | None = None):
+        self._choices = choices if callable(choices) else tuple(hyphenated(c) for c in choices)
         self.what = what
+        self.default = None if default is None else hyphenated(default)
         self.__name__ = what            # argparse names the type in some messages
 
+    @property
+    def resolved(self) -> bool:
+        """Whether the choices are known (not a function still to call)."""
+        return not callable(self._choices)
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        """The valid names, hyphenated."""
+        if callable(self._choices):
+            self._choices = tuple(hyphenated(c) for c in self._choices())
+        return self._choices
+
     def __call__(self, text: str) -> str:
+        if text == self.default:        # argparse converts a string default too: no lookup
+            return text
         return hyphenated(choose(text, self.choices, what=self.what, where="",
                                  error=argparse.ArgumentTypeError))
 
@@ -100,14 +131,15 @@ class Named:
         return "{" + ",".join(self.choices) + "}"
 
 
-def add_named(p: argparse.ArgumentParser, flag: str, choices: Iterable[str], default,
+def add_named(p: argparse.ArgumentParser, flag: str, choices, default,
               help: str | None = None, *, what: str | None = None) -> None:
-    """Add the named option ``flag`` to ``p``: either spelling accepted, the choices listed in
-    the help, ``default`` (a name, or None) shown hyphenated."""
-    kind = Named(choices, what or flag.lstrip("-").replace("-", " "))
+    """Add the named option ``flag`` to ``p``: either spelling accepted, the choices (names, or
+    a function returning them, see :class:`Named`) listed in the help, ``default`` (a name,
+    or None) shown hyphenated."""
     default = None if default is None else hyphenated(default)
+    kind = Named(choices, what or flag.lstrip("-").replace("-", " "), default=default)
     text = (help + " " if help else "") + ("(default: %(default)s)" if default else "")
-    p.add_argument(flag, type=kind, default=default, metavar=kind.metavar, help=text or None)
+    p.add_argument(flag, type=kind, default=default, help=text or None)
 
 
 def add_mirrored(p: argparse.ArgumentParser, flag: str, func: Callable, name: str, help: str,
@@ -119,18 +151,32 @@ def add_mirrored(p: argparse.ArgumentParser, flag: str, func: Callable, name: st
     p.add_argument(flag, type=type, default=default, help=f"{help} (default: %(default)s)")
 
 
+def _energy_names() -> list[str]:
+    from ..energies import ENERGIES
+
+    return sorted(ENERGIES)
+
+
+def _solver_names() -> list[str]:
+    from ..optimize import SOLVERS
+
+    return list(SOLVERS)
+
+
 def add_flatten_options(p: argparse.ArgumentParser) -> None:
     """The options of ``jaxparam flatten`` (and ``batch``); defaults are
-    :func:`jaxparam.convex_map`'s and :func:`jaxparam.minimize`'s."""
+    :func:`jaxparam.convex_map`'s and :func:`jaxparam.minimize`'s (the latter as
+    :func:`~.pipeline.flatten_mesh` repeats them, so that a linear flatten imports neither
+    the energies nor the optimizers: ``tests/test_cli.py`` checks that they agree)."""
     add_named(p, "--weights", wts.KINDS, default_of(convex_map, "weights"))
     add_named(p, "--boundary", bmap.SHAPES, default_of(convex_map, "boundary"))
     add_named(p, "--spacing", bmap.SPACINGS, default_of(convex_map, "spacing"))
-    add_named(p, "--energy", sorted(ENERGIES), None,
+    add_named(p, "--energy", _energy_names, None,
               "minimize this energy after the convex map (e.g. symmetric-dirichlet, mips)")
     p.add_argument("--free-boundary", action="store_true",
                    help="let the boundary move while minimizing (needs --energy)")
-    add_named(p, "--solver", SOLVERS, default_of(minimize, "solver"))
-    add_mirrored(p, "--max-iters", minimize, "max_iters", "iterations at most")
+    add_named(p, "--solver", _solver_names, default_of(flatten_mesh, "solver"))
+    add_mirrored(p, "--max-iters", flatten_mesh, "max_iters", "iterations at most")
 
 
 def flatten_options(args: argparse.Namespace) -> dict:

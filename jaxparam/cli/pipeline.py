@@ -13,8 +13,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -53,19 +51,18 @@ def failure(exc: BaseException) -> tuple[int, str]:
 
 
 def enable_compile_cache() -> None:
-    """Turn on JAX's persistent compilation cache, so a second run skips most compilation.
+    """Turn on JAX's persistent compilation cache, so a second run skips most compilation:
+    :attr:`jp.config.compile_cache <jaxparam.settings.Settings.compile_cache>` (the folder
+    ``$JAXPARAM_CACHE``, else ``~/.cache/jaxparam/jax``; ``JAXPARAM_CACHE=off`` turns it off).
 
-    The folder is ``$JAXPARAM_CACHE``, else ``~/.cache/jaxparam/jax``; compilations over
-    0.2 s are kept.  An old JAX without the option runs uncached.
+    ``import jaxparam`` already does this; the commands and the batch workers' initializer
+    call it to say so.  It imports no JAX: the setting is applied when JAX loads (at once if
+    it is loaded), so a command that never needs JAX (a linear ``flatten``) never loads it.
     """
-    import jax
+    from ..lazy_jax import when_jax_loads
+    from ..settings import configure_jax
 
-    cache = os.environ.get("JAXPARAM_CACHE", str(Path.home() / ".cache" / "jaxparam" / "jax"))
-    try:
-        jax.config.update("jax_compilation_cache_dir", cache)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
-    except Exception:  # an old JAX without the option: run uncached
-        pass
+    when_jax_loads(configure_jax)
 
 
 def clean(obj):

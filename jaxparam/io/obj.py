@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshFileError
-from .files import read_text
+from .files import read_text, write_rows
 
 __all__ = ["parse_obj", "read_obj", "write_obj", "corner_to_vertex_uv", "read_number_fields"]
 
@@ -107,17 +107,17 @@ def write_obj(f, V, F, uv=None, texcoords=None, uv_faces=None) -> None:
     table ``texcoords (t, 2)`` with faces ``f a/x b/y c/z`` for per-corner UVs, or bare
     ``f a b c``.  ``nan`` UVs (vertices in no face) are written as 0."""
     f.write("# written by jaxparam\n")
-    np.savetxt(f, V, fmt="v %.17g %.17g %.17g")
-    F1 = F + 1
+    write_rows(f, "v %.17g %.17g %.17g\n", np.asarray(V, np.float64))
+    F1 = np.asarray(F, np.int64) + 1
     if uv is not None:
-        np.savetxt(f, np.nan_to_num(uv), fmt="vt %.17g %.17g")
-        np.savetxt(f, np.repeat(F1, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+        write_rows(f, "vt %.17g %.17g\n", np.nan_to_num(np.asarray(uv, np.float64)))
+        write_rows(f, "f %d/%d %d/%d %d/%d\n", np.repeat(F1, 2, axis=1))
     elif texcoords is not None:
-        np.savetxt(f, np.nan_to_num(texcoords), fmt="vt %.17g %.17g")
-        pairs = np.stack([F1, uv_faces + 1], axis=2).reshape(-1, 6)
-        np.savetxt(f, pairs, fmt="f %d/%d %d/%d %d/%d")
+        write_rows(f, "vt %.17g %.17g\n", np.nan_to_num(np.asarray(texcoords, np.float64)))
+        pairs = np.stack([F1, np.asarray(uv_faces, np.int64) + 1], axis=2).reshape(-1, 6)
+        write_rows(f, "f %d/%d %d/%d %d/%d\n", pairs)
     else:
-        np.savetxt(f, F1, fmt="f %d %d %d")
+        write_rows(f, "f %d %d %d\n", F1)
 
 
 def _obj_index(tok: str, count: int, path, line_no: int) -> int:

@@ -35,9 +35,10 @@ Modules, one job each: :mod:`~jaxparam.sparse.counters` (:data:`stats`),
 """
 from __future__ import annotations
 
-from .backends import BACKENDS, Factorization, available_backends, factorize
+from .backends import BACKENDS, Factorization, available_backends, factorize, warm_up
 from .counters import stats
 from .differentiable import solve
 from .pattern import Pattern
 
-__all__ = ["Pattern", "Factorization", "factorize", "solve", "available_backends", "stats"]
+__all__ = ["Pattern", "Factorization", "factorize", "solve", "available_backends", "stats",
+           "warm_up"]

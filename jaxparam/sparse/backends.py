@@ -7,6 +7,7 @@ available) live here; ``pardiso`` in :mod:`jaxparam.sparse.pardiso`.
 from __future__ import annotations
 
 import functools
+import threading
 
 import numpy as np
 import scipy.sparse as sp
@@ -228,3 +229,29 @@ def factorize(pattern: Pattern, values, *, symmetric: bool = False, backend: str
             return Factorization(pattern, values, bool(symmetric), "scipy")
         except SolverError as second:
             raise SolverError(f"{second} (Before: {first})", stage="factorize") from None
+
+
+def warm_up() -> threading.Thread:
+    """Start the fastest backend's runtime in a background thread and return the thread.
+
+    PARDISO's first call in a process initializes MKL (0.1-0.4 s, in C with the GIL released),
+    so a one-off command (``jaxparam flatten``) runs it while it reads and checks its input;
+    join the thread before the first :func:`factorize` (its two 2x2 factorizations are taken
+    back out of :data:`stats`, which assumes nothing else factorizes meanwhile).  Does nothing
+    when PARDISO is not available.
+    """
+    def run():
+        before = dict(stats)
+        try:
+            if mkl() is not None:
+                P = Pattern(np.array([0, 1, 2]), np.array([0, 1]), 2)
+                Factorization(P, np.array([2.0, 1.0]), True, "pardiso").solve(np.ones(2))
+                Factorization(P, np.array([2.0, 1.0]), False, "pardiso").solve(np.ones(2))
+        except Exception:       # a failing backend shows itself, with its message, when used
+            pass
+        for key in stats:
+            stats[key] = before.get(key, 0)
+
+    thread = threading.Thread(target=run, name="jaxparam-sparse-warm-up", daemon=True)
+    thread.start()
+    return thread

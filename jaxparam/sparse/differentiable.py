@@ -10,10 +10,9 @@ import hashlib
 import threading
 from collections import OrderedDict
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
+from ..lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from ..errors import SolverError
 from .backends import Factorization, choose_backend, factorize
 from .counters import stats
