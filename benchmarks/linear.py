@@ -27,7 +27,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parent.parent / "shared" / "data" / "meshes" / "camelhead.off"
 METHODS = ["uniform", "inverse_distance", "shape_preserving", "mean_value", "harmonic",
-           "igl_harmonic", "igl_uniform", "igl_lscm"]
+           "shape_preserving+host", "harmonic+host", "igl_harmonic", "igl_uniform", "igl_lscm"]
 
 
 def _mesh_arrays(refine: int):
@@ -35,7 +35,7 @@ def _mesh_arrays(refine: int):
 
     import jaxparam as jp
 
-    mesh = jp.shapes.refine(jp.load(DATA), refine)
+    mesh = jp.shapes.refine(jp.load(os.environ.get("JAXPARAM_BENCH_MESH", DATA)), refine)
     return np.asarray(mesh.vertices), mesh.faces
 
 
@@ -71,6 +71,18 @@ def run_one(method: str, refine: int) -> dict:
         area_sign = np.sign(np.sum(np.asarray(A)))
         out["flips"] = int(np.sum(np.asarray(A) * area_sign <= 0))
         del loop
+    elif method.endswith("+host"):
+        import jaxparam as jp
+
+        # convex_map(host=True): NumPy weights, assembly and scatter, nothing compiled (the
+        # CLI's path).  Run 1 warms the solver library; run 2, on a fresh mesh, is timed.
+        kind = method[: -len("+host")]
+        jp.convex_map(jp.TriMesh(V, F, validate=False), weights=kind, host=True)
+        t0 = time.perf_counter()
+        mesh = jp.TriMesh(V, F, validate=False)
+        uv = jp.convex_map(mesh, weights=kind, host=True)
+        out["total"] = time.perf_counter() - t0
+        out["flips"] = jp.metrics.flips(mesh, uv)
     else:
         import jax
 
@@ -125,12 +137,16 @@ def main() -> int:
     ap.add_argument("--methods", nargs="*", default=METHODS)
     ap.add_argument("--one", nargs=2, help=argparse.SUPPRESS)
     ap.add_argument("--json", help="also write the rows to this JSON file")
+    ap.add_argument("--data", type=Path, default=DATA,
+                    help="the base mesh to refine (default camelhead; e.g. camel_b.obj --refine 4 "
+                         "for a 915k-face mesh not in ../shared)")
     args = ap.parse_args()
+    os.environ["JAXPARAM_BENCH_MESH"] = str(args.data)
     if args.one:
         print(json.dumps(run_one(args.one[0], int(args.one[1]))))
         return 0
-    if not DATA.exists():
-        print(f"camelhead not found at {DATA}: the benchmark needs ../shared/data")
+    if not args.data.exists():
+        print(f"{args.data} not found: the benchmark needs ../shared/data")
         return 1
     rows = []
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
@@ -153,9 +169,10 @@ def main() -> int:
                   f"{row['peak_rss_mb']:8.0f} {row['flips']:5d} {row.get('backend', '-'):>8s}", flush=True)
         # Ratios against igl.harmonic on this size.
         base = [x for x in rows if x["method"] == "igl_harmonic" and x["faces"] == rows[-1]["faces"]]
-        sp = [x for x in rows if x["method"] == "shape_preserving" and x["faces"] == rows[-1]["faces"]]
-        if base and sp:
-            print(f"{'':8s} shape_preserving / igl.harmonic = {sp[0]['total'] / base[0]['total']:.3f}")
+        for name in ("shape_preserving", "shape_preserving+host", "harmonic", "harmonic+host"):
+            sp = [x for x in rows if x["method"] == name and x["faces"] == rows[-1]["faces"]]
+            if base and sp:
+                print(f"{'':8s} {name} / igl.harmonic = {sp[0]['total'] / base[0]['total']:.3f}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0

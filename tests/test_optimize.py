@@ -204,3 +204,38 @@ def test_equal_energies_share_compiled_code(mesh, start, solver):
     assert problem.energy_value_and_grad._cache_size() == n
     assert count_compiles(lambda: run(jp.energy(g))) > 0       # another function: no collision
     assert problem.energy_value_and_grad._cache_size() == n + 1
+
+
+@pytest.mark.parametrize("free_boundary", [True, False])
+def test_the_hessian_pattern_is_the_dof_pairs_of_the_faces(free_boundary):
+    # Reference: every (row dof, col dof) pair of every face, sorted and deduplicated (the
+    # construction the block-wise one replaced, issue 17).
+    from jaxparam.optimize import problem as pb
+
+    mesh = jp.shapes.disk(5, seed=3, height=0.2)
+    free = np.asarray(pb.free_vertices(mesh.topology, free_boundary), np.int64)
+    hp = pb.hessian_pattern(mesh.topology, free.tobytes())
+    assert pb.hessian_pattern(mesh.topology, free.tobytes()) is hp        # cached
+    slot = np.full(mesh.n_vertices, -1)
+    slot[free] = np.arange(free.size)
+    s = slot[mesh.faces]
+    dof = np.where(s[:, :, None] >= 0, 2 * s[:, :, None] + np.arange(2), -1).reshape(-1, 6)
+    r, c = np.repeat(dof, 6, axis=1).ravel(), np.tile(dof, (1, 6)).ravel()
+    ok = (r >= 0) & (c >= 0)
+    N = 2 * free.size
+    uniq, inv = np.unique(r[ok] * N + c[ok], return_inverse=True)
+    assert np.array_equal(hp.pattern.indices, uniq % N)
+    assert np.array_equal(hp.pattern.indptr, np.concatenate([[0], np.cumsum(np.bincount(uniq // N, minlength=N))]))
+    assert np.array_equal(hp.pos[ok], inv) and np.all(hp.pos[~ok] == -1)
+    assert np.array_equal(hp.diag, np.searchsorted(uniq, np.arange(N) * (N + 1)))
+
+
+def test_the_host_normalization_equals_the_jax_one():
+    from jaxparam.optimize import problem as pb
+
+    mesh = jp.shapes.disk(5, seed=4, height=0.3)
+    uv = np.asarray(jp.convex_map(mesh))
+    P = pb.Problem(mesh, jp.energies.get("symmetric_dirichlet"), True, uv)
+    x = np.asarray(P.x0) * 1.7 + 0.3 * np.sin(np.arange(P.x0.size))
+    ref = np.asarray(pb.normalized(x, P.base, P.free, P.F))
+    assert np.max(np.abs(P.normalize(x) - ref)) < 1e-13 * np.max(np.abs(ref))

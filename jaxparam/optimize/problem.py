@@ -24,7 +24,7 @@ from ..errors import SolverError
 
 __all__ = ["Problem", "HessianPattern", "uv_of", "energy_at", "energy_value",
            "energy_value_and_grad", "count_flipped", "max_step_along", "jacobian_maps",
-           "free_vertices", "normalized"]
+           "free_vertices", "normalized", "hessian_pattern"]
 
 
 def free_vertices(topology, free_boundary: bool) -> np.ndarray:
@@ -97,6 +97,52 @@ class HessianPattern:
     diag: np.ndarray
 
 
+@functools.lru_cache(maxsize=8)
+def hessian_pattern(topology, free: bytes) -> HessianPattern:
+    """The :class:`HessianPattern` of the faces of ``topology`` over the free vertices
+    (``free``: their ``int64`` indices as bytes, the cache key), built once per pair: a
+    minimization's first iteration then costs no pattern build and no PARDISO analysis when
+    the same mesh is minimized again (issue 17)."""
+    free = np.frombuffer(free, np.int64)
+    F, K = topology.faces, free.size
+    slot = np.full(topology.n_vertices, -1, np.int64)
+    slot[free] = np.arange(K)
+    s = slot[F]                                                 # (m, 3) free slots, -1 fixed
+    # The 2x2 blocks of vertex pairs (p, q) first (9 a face: 4x fewer keys to sort than the
+    # 36 dof pairs), then each block's 4 entries placed arithmetically.
+    a, b = np.divmod(np.arange(9), 3)
+    r, c = s[:, a], s[:, b]                                     # (m, 9)
+    ok = (r >= 0) & (c >= 0)
+    uniq, inv = np.unique((r * np.int64(K) + c)[ok], return_inverse=True)
+    block = np.full(r.shape, -1, np.int64)
+    block[ok] = inv
+    vr, vq = uniq // K, uniq % K                                # block row and column vertex
+    deg = np.bincount(vr, minlength=K)                          # blocks in each vertex row
+    vs = np.zeros(K + 1, np.int64)
+    np.cumsum(deg, out=vs[1:])
+    N = 2 * K
+    # dof row 2p+i holds, for each block (p, q) of vertex row p in order, columns 2q, 2q+1.
+    indptr = np.empty(N + 1, np.int64)
+    indptr[0:N:2], indptr[1:N:2], indptr[N] = 4 * vs[:-1], 4 * vs[:-1] + 2 * deg, 4 * vs[-1]
+
+    def entry(k, i, j):
+        """CSR slot of entry (i, j) of block ``k``."""
+        p = vr[k]
+        return 4 * vs[p] + i * 2 * deg[p] + 2 * (k - vs[p]) + j
+
+    cols = np.empty(4 * uniq.size, np.int64)
+    pos = np.full((F.shape[0], 6, 6), -1, np.int64)             # face entry (2a+i, 2b+j)
+    kf = block.reshape(-1, 3, 3)
+    for i in range(2):
+        for j in range(2):
+            cols[entry(np.arange(uniq.size), i, j)] = 2 * vq + j
+            pos[:, i::2, j::2] = np.where(kf >= 0, entry(np.maximum(kf, 0), i, j), -1)
+    kpp = np.searchsorted(uniq, np.arange(K) * np.int64(K) + np.arange(K))
+    diag = np.empty(N, np.int64)
+    diag[0::2], diag[1::2] = entry(kpp, 0, 0), entry(kpp, 1, 1)
+    return HessianPattern(sparse.Pattern(indptr, cols, N), pos.reshape(-1), diag)
+
+
 class Problem:
     """Everything about one minimization that does not change between iterations.
 
@@ -159,35 +205,39 @@ class Problem:
 
     @functools.cached_property
     def hessian_pattern(self) -> HessianPattern:
-        """The sparse Hessian's :class:`HessianPattern`, computed on first use."""
-        n = self.mesh.n_vertices
-        slot = np.full(n, -1, np.int64)
-        slot[self.free] = np.arange(self.free.size)
-        s = slot[self.F]                                            # (m, 3)
-        dof = np.where(s[:, :, None] >= 0, 2 * s[:, :, None] + np.arange(2), -1).reshape(-1, 6)
-        r = np.repeat(dof, 6, axis=1)                               # (m, 36) row dofs
-        c = np.tile(dof, (1, 6))                                    # (m, 36) col dofs
-        ok = (r >= 0) & (c >= 0)
-        N = 2 * self.free.size
-        key = np.where(ok, r * np.int64(N) + c, -1).reshape(-1)
-        uniq, inv = np.unique(key[key >= 0], return_inverse=True)
-        pos = np.full(key.size, -1, np.int64)
-        pos[key >= 0] = inv
-        rows, cols = uniq // N, uniq % N
-        indptr = np.zeros(N + 1, np.int64)
-        np.cumsum(np.bincount(rows, minlength=N), out=indptr[1:])
-        diag = np.searchsorted(uniq, np.arange(N) * np.int64(N) + np.arange(N))
-        return HessianPattern(sparse.Pattern(indptr, cols, N), pos, diag)
+        """The sparse Hessian's :class:`HessianPattern` (:func:`hessian_pattern`: one per
+        topology and free set, so a second minimization reuses it, and PARDISO its symbolic
+        analysis)."""
+        return hessian_pattern(self.mesh.topology, np.asarray(self.free, np.int64).tobytes())
 
     def normalize(self, x):
         """Free boundary, scale-invariant energy: recentre and rescale to the start's area
-        (on the host; :func:`normalized` is the same map in JAX)."""
-        uv = np.asarray(self.uv(x))[self.free]
-        U0 = np.asarray(self.x0).reshape(-1, 2)
-        a0 = float(np.sum(np.asarray(geo.signed_areas(self.uv(self.x0), self.F))))
-        a = float(np.sum(np.asarray(geo.signed_areas(self.uv(x), self.F))))
-        uv = (uv - uv.mean(0)) * np.sqrt(a0 / a) + U0.mean(0)
-        return uv.reshape(-1)
+        (in NumPy, no device round trip: :func:`normalized` is the same map in JAX)."""
+        U = np.asarray(x, np.float64).reshape(-1, 2)
+        a0, centre0 = self._start_area_and_centre
+        a = _signed_area_sum(self._host_uv(U), self.F)
+        return ((U - U.mean(0)) * np.sqrt(a0 / a) + centre0).reshape(-1)
+
+    def _host_uv(self, U):
+        uv = self._host_base.copy()
+        uv[self.free] = U
+        return uv
+
+    @functools.cached_property
+    def _host_base(self):
+        return np.asarray(self.base, np.float64)
+
+    @functools.cached_property
+    def _start_area_and_centre(self):
+        U0 = np.asarray(self.x0, np.float64).reshape(-1, 2)
+        return _signed_area_sum(self._host_uv(U0), self.F), U0.mean(0)
+
+
+def _signed_area_sum(uv, F) -> float:
+    """The sum of the signed UV areas of the faces (NumPy twin of ``geo.signed_areas``)."""
+    Q = uv[F]
+    d1, d2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
+    return float(np.sum(0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])))
 
 
 def normalized(x, base, free, F):
