@@ -10,7 +10,8 @@ against the fraction of coefficients kept, one curve per wavelet) goes to ``--pl
 Part 3 (``--faithful``): the default remesh (area-aware map) of every disk mesh in
 ``../shared/data/meshes``: seconds, and per level the Hausdorff (larger way) and RMS
 distance from the input, % of the diagonal (``Remesh.errors``).  Part 4 (``--default-map``):
-seconds of ``jp.remesh(mesh)`` with its default map (``area_aware_map``) at each ``--refine``.
+seconds of ``jp.remesh(mesh)`` with its default map (``area_aware_map``, reweighted for level 6
+up to 40k faces) at each ``--refine``.
 
 Usage::
 
@@ -41,7 +42,8 @@ def main() -> int:
     ap.add_argument("--samples", type=int, default=20_000, help="points per surface (errors)")
     args = ap.parse_args()
     import jaxparam as jp
-    from jaxparam.remesh import area_aware_map, base_domain, measure_errors, refine_domain
+    from jaxparam.remesh import (AREA_MAP_FULL_FACES, area_aware_map, base_domain, measure_errors,
+                                 refine_domain)
     from jaxparam.triangles import locate
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
@@ -81,7 +83,8 @@ def main() -> int:
         for r in args.refine:
             mesh = jp.shapes.refine(base, r) if r else base
             t = time.perf_counter()
-            uv = np.asarray(area_aware_map(mesh))
+            big = mesh.n_faces > AREA_MAP_FULL_FACES          # as jp.remesh's default
+            uv = np.asarray(area_aware_map(mesh, levels=None if big else 6))
             t_map = time.perf_counter() - t
             t = time.perf_counter()
             np.asarray(jp.remesh(mesh, uv, levels=6).mesh.vertices)

@@ -11,8 +11,9 @@ vertex new at level ``l + 1``, its wavelet coefficient in ``W^l``:
 - ``"butterfly"`` (the default): the butterfly prediction (:func:`butterfly_stencil`: the
   edge's ends, the two opposite vertices and four wings; the 4-point rule along the
   boundary), then the same lifting update as ``"lifted"``.  On camelhead's level-6 remesh
-  its RMS error at 5 % of the coefficients is 0.69 of the lazy wavelet's (``"lifted"``:
-  0.78; benchmarks/remesh.py draws the rate-distortion curves);
+  its RMS error at 5 % of the coefficients is 0.65 of the lazy wavelet's through the
+  density-stretch map, 0.71 through the default map reweighted for level 6 (``"lifted"``:
+  0.78 on the former; benchmarks/remesh.py draws the rate-distortion curves);
 - ``"lifted"``: the midpoint prediction followed by a lifting update (Schröder & Sweldens'
   lifting, as in their spherical wavelets, ref. [29]) of every coarse vertex,
   ``x_v += 3 / (4 k_v) * sum of d_w over the k_v new vertices around v``, which keeps the

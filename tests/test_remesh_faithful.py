@@ -58,13 +58,13 @@ def test_the_area_aware_map_has_no_flip_and_spreads_area_evenly(mesh):
     tutte = np.asarray(jp.convex_map(mesh))
     # UV area per 3D area: the convex map squeezes (a wide spread), the area-aware map less.
     spread = lambda r: np.quantile(r, 0.95) / np.quantile(r, 0.05)
-    assert spread(uv_area_over_3d(mesh, uv)) < 0.75 * spread(uv_area_over_3d(mesh, tutte))
+    assert spread(uv_area_over_3d(mesh, uv)) < 0.8 * spread(uv_area_over_3d(mesh, tutte))
     st = ENERGIES["stretch"]
     assert float(st(mesh, uv)) < float(st(mesh, tutte))
 
 
 def test_the_default_remesh_uses_the_area_aware_map_and_a_given_uv_is_honoured(mesh, semi):
-    uv = area_aware_map(mesh)
+    uv = area_aware_map(mesh, levels=4)          # reweighted where the level-4 remesh is far
     again = jp.remesh(mesh, uv, levels=4)
     np.testing.assert_allclose(np.asarray(again.mesh.vertices), np.asarray(semi.mesh.vertices), atol=1e-12)
     tutte = jp.remesh(mesh, jp.convex_map(mesh), levels=4)
@@ -250,6 +250,43 @@ def test_area_map_iters_fall_with_the_size():
     assert area_map_iters(1_000) == AREA_MAP_ITERS
     assert AREA_MAP_MIN_ITERS <= area_map_iters(363_264) < AREA_MAP_ITERS
     assert area_map_iters(10 ** 8) == AREA_MAP_MIN_ITERS
+
+
+def test_the_default_map_samples_where_the_error_is(mesh):
+    """area_aware_map(levels=j) reweights the faces far from the level-j remesh: flip-free, and
+    the largest distance to the level-3 remesh drops by more than 30 % (measured 65 %), also by
+    an independent sampled measurement."""
+    from jaxparam.distance import surface_distance
+    from jaxparam.remesh import level_errors
+    plain, tuned = area_aware_map(mesh), area_aware_map(mesh, levels=3)
+    assert np.all(np.asarray(geo.signed_areas(jnp.asarray(tuned), mesh.faces)) > 0)
+    assert level_errors(mesh, tuned, 3).max() < 0.7 * level_errors(mesh, plain, 3).max()
+    V = np.asarray(mesh.vertices)
+
+    def hausdorff(uv):
+        s = jp.remesh(mesh, uv, levels=3)
+        d = surface_distance(V, mesh.faces, np.asarray(s.mesh.vertices), s.mesh.faces,
+                             samples=3000, seed=5)
+        return max(d.hausdorff_ab, d.hausdorff_ba)
+    assert hausdorff(tuned) < 0.8 * hausdorff(plain)
+
+
+def test_the_default_map_minimizes_the_density_stretch(mesh):
+    """The default map is solved as the plain stretch with per-face weights (closed-form
+    Hessians): the same minimizer as jp.minimize of density_stretch, a lower energy than its
+    start, and the traced path (jax.grad) runs that minimize."""
+    from jaxparam.energies import density_stretch
+    A = np.asarray(geo.face_areas(jnp.asarray(mesh.vertices), mesh.faces))
+    en = density_stretch(float(A.mean()))
+    start = jp.convex_map(mesh, boundary="circle")
+    ref = jp.minimize(mesh, en, init=start, max_iters=200, verbose=False).uv
+    uv = area_aware_map(mesh, max_iters=200)
+    np.testing.assert_allclose(uv, np.asarray(ref), atol=1e-4)        # both stop at energy_rtol
+    assert abs(float(en(mesh, uv)) - float(en(mesh, ref))) < 1e-8 * float(en(mesh, ref))
+    assert float(en(mesh, uv)) < 0.99 * float(en(mesh, start))
+    V = jnp.asarray(mesh.vertices)
+    g = jax.grad(lambda X: jnp.sum(area_aware_map(jp.TriMesh(X, mesh.faces)) ** 2))(V)
+    assert np.all(np.isfinite(np.asarray(g))) and float(jnp.abs(g).max()) > 0
 
 
 def test_boundary_samples_snap_onto_the_input_boundary_corners():

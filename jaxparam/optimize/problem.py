@@ -152,16 +152,20 @@ class Problem:
     vertices (referenced ones; all of them with ``free_boundary``, else the interior),
     ``base (n, 2)`` the start UVs (NaN rows zeroed), ``x0 (2 k,)`` the start's free DOFs,
     ``free_boundary``.  The methods take and return host (NumPy) values.
+
+    ``areas (m,)``, when given, replaces the 3D areas as each face's weight in the energy's
+    sum (e.g. :func:`jaxparam.remesh.area_aware_map`'s per-face density weights).
     """
 
-    def __init__(self, mesh, en, free_boundary: bool, uv0):
+    def __init__(self, mesh, en, free_boundary: bool, uv0, areas=None):
         t = mesh.topology
         self.mesh, self.en = mesh, en.static
         self.params = jax.tree_util.tree_map(jnp.asarray, en.params)
         self.F = mesh.faces
         V = jnp.asarray(mesh.vertices, dtype=jnp.float64)
         self.frames = geo.local_frames(V, self.F)
-        self.areas = geo.face_areas(V, self.F)
+        self.areas = (geo.face_areas(V, self.F) if areas is None
+                      else jnp.asarray(areas, dtype=jnp.float64))
         self.free = free_vertices(t, free_boundary)
         if self.free.size == 0:
             raise SolverError("minimize: no free vertex to optimize (every vertex is on the fixed "
