@@ -12,11 +12,11 @@ Tables printed:
 3. **Fig. 26**: about 100 base faces, level 3, lifted wavelets keeping 2 % of the input's
    vertex data (``3 n`` numbers): the error of the compressed remesh.
 4. **MeshLab's isoparametrization** (``pymeshlab``, a benchmark peer only) on the same
-   meshes where it installs: seconds, success, error.
+   meshes where it installs, paired with ours: seconds, success, faces, error, load.
 
 Usage::
 
-    python benchmarks/manifold.py [--paths] [--big] [--quick]
+    python benchmarks/manifold.py [--paths] [--big] [--quick] [--meshlab] [--scaling]
 """
 from __future__ import annotations
 
@@ -76,7 +76,8 @@ def scaling_table(jp, big: bool) -> None:
     from jaxparam.subdivision import midpoint_refine
     print("\n## scaling: bunny refined, 100 base faces, level 4 (wall seconds; CPU seconds of "
           "this process beside them, which a loaded machine does not inflate)")
-    print(f"{'faces':>8s} {'map s':>7s} {'map cpu':>7s} {'remesh s':>8s} {'rem cpu':>7s} {'total s':>8s} {'total cpu':>9s}")
+    print(f"{'faces':>8s} {'map s':>7s} {'map cpu':>7s} {'remesh s':>8s} {'rem cpu':>7s} {'total s':>8s} {'total cpu':>9s} "
+          f"{'load':>5s}")
     mesh = jp.load(DATA / "bunny.off")
     V, F = np.asarray(mesh.vertices), mesh.faces
     sizes = [10_000, 30_000, 100_000] + ([400_000] if big else [])
@@ -87,6 +88,7 @@ def scaling_table(jp, big: bool) -> None:
         if G.shape[0] < 0.6 * target:          # bunny is 7k: 1 split -> 28k, 2 -> 111k
             W, G = midpoint_refine(W, G)
         m = jp.TriMesh(W, G)
+        load = _load()
         t, c = time.perf_counter(), time.process_time()
         base, param = jp.manifold_map(m, 100, verbose=False)
         t_map, c_map = time.perf_counter() - t, time.process_time() - c
@@ -94,7 +96,7 @@ def scaling_table(jp, big: bool) -> None:
         param.remesh(4)
         t_rem, c_rem = time.perf_counter() - t, time.process_time() - c
         print(f"{m.n_faces:8d} {t_map:7.1f} {c_map:7.1f} {t_rem:8.1f} {c_rem:7.1f} {t_map + t_rem:8.1f} "
-              f"{c_map + c_rem:9.1f}", flush=True)
+              f"{c_map + c_rem:9.1f} {load:>5s}", flush=True)
 
 
 def fig26(jp) -> None:
@@ -116,26 +118,70 @@ def fig26(jp) -> None:
               f"{100 * d.rms:7.4f} {100 * d0.hausdorff:10.3f}", flush=True)
 
 
-def meshlab(jp) -> None:
-    print("\n## MeshLab isoparametrization (pymeshlab, peer)")
+def _load() -> str:
+    """The 1-minute load average (the box is shared: seconds inflate with it)."""
+    return f"{os.getloadavg()[0]:.1f}" if hasattr(os, "getloadavg") else "-"
+
+
+def meshlab(jp, names=CLOSED, base=100, levels=4, samplingrate=10, timeout=600) -> None:
+    """MeshLab's isoparametrization (Pietroni et al.; ``pymeshlab``, a peer here only) beside
+    ``jp.manifold_map`` on the same meshes, paired (ours, then MeshLab, back to back):
+    abstract domain of ``base`` +- 10 % faces (``targetabstractmin/maxfacenum``), remeshed
+    with ``samplingrate`` (MeshLab's default 10; 16 gave 72.9k faces on bunny, 3x our
+    level 4's 25.6k, and the faces grow as its square, so 10 should give about 28k).
+    MeshLab runs in a child process (it can take minutes, or crash), stopped after
+    ``timeout`` seconds."""
+    print(f"\n## MeshLab isoparametrization (pymeshlab, peer) vs jaxparam, ~{base} base faces, "
+          f"level {levels} / samplingrate {samplingrate}")
     try:
-        import pymeshlab
+        import pymeshlab  # noqa: F401
     except ImportError:
         print("pymeshlab is not installed (pip install pymeshlab): skipped")
         return
-    print(f"{'mesh':>20s} {'result':>8s} {'seconds':>8s} {'H %':>7s}")
-    for name in CLOSED:
-        ms = pymeshlab.MeshSet()
-        ms.load_new_mesh(str(DATA / name))
+    import subprocess
+    import sys
+    import tempfile
+    print(f"{'mesh':>20s} {'who':>9s} {'result':>8s} {'seconds':>8s} {'faces':>7s} {'H %':>7s} {'RMS %':>7s} "
+          f"{'load':>5s}")
+    for name in names:
+        mesh = jp.load(DATA / name)
+        load = _load()
         t = time.perf_counter()
-        try:
-            ms.apply_filter("compute_texcoord_parametrization_and_remesh_isoparametrization"
-                            if hasattr(ms, "compute_texcoord_parametrization_and_remesh_isoparametrization")
-                            else "iso_parametrization")
-            res = "ok"
-        except Exception as exc:  # noqa: BLE001 - a peer's failure is a result here
-            res = f"failed: {str(exc)[:40]}"
-        print(f"{name:>20s} {res:>8s} {time.perf_counter() - t:8.1f} {'-':>7s}", flush=True)
+        base_mesh, param = jp.manifold_map(mesh, max(base, 52), verbose=False)
+        semi = param.remesh(levels)
+        sec = time.perf_counter() - t
+        d = _dist(jp, mesh, semi.mesh)
+        print(f"{name:>20s} {'jaxparam':>9s} {'ok':>8s} {sec:8.1f} {semi.mesh.n_faces:7d} {100 * d.hausdorff:7.3f} "
+              f"{100 * d.rms:7.4f} {load:>5s}", flush=True)
+        load = _load()
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "iso.npz"
+            code = (
+                "import sys, time, numpy as np, pymeshlab\n"
+                "ms = pymeshlab.MeshSet(); ms.load_new_mesh(sys.argv[1]); t = time.perf_counter()\n"
+                f"ms.compute_iso_parametrization(targetabstractminfacenum={int(0.9 * base)}, "
+                f"targetabstractmaxfacenum={int(1.1 * base)})\n"
+                f"ms.generate_iso_parametrization_remeshing(samplingrate={samplingrate})\n"
+                "m = ms.current_mesh()\n"
+                "np.savez(sys.argv[2], V=m.vertex_matrix(), F=m.face_matrix(), t=time.perf_counter() - t)\n")
+            t = time.perf_counter()
+            try:
+                run = subprocess.run([sys.executable, "-c", code, str(DATA / name), str(out)],
+                                     capture_output=True, text=True, timeout=timeout)
+                res = "ok" if run.returncode == 0 and out.exists() else "failed"
+                why = (run.stderr.strip().splitlines() or [""])[-1][:60] if res != "ok" else ""
+            except subprocess.TimeoutExpired:
+                res, why = "timeout", f"> {timeout} s"
+            sec = time.perf_counter() - t
+            if res == "ok":
+                z = np.load(out)
+                d = jp.distance.surface_distance(np.asarray(mesh.vertices), mesh.faces, z["V"], z["F"],
+                                                 samples=20_000)
+                print(f"{name:>20s} {'MeshLab':>9s} {res:>8s} {float(z['t']):8.1f} {z['F'].shape[0]:7d} "
+                      f"{100 * d.hausdorff:7.3f} {100 * d.rms:7.4f} {load:>5s}", flush=True)
+            else:
+                print(f"{name:>20s} {'MeshLab':>9s} {res:>8s} {sec:8.1f} {'-':>7s} {'-':>7s} {'-':>7s} {load:>5s}  "
+                      f"{why}", flush=True)
 
 
 def main() -> int:
@@ -145,9 +191,18 @@ def main() -> int:
     ap.add_argument("--paths", action="store_true", help="also the path-tracing route")
     ap.add_argument("--big", action="store_true", help="add 400k faces to the scaling table")
     ap.add_argument("--quick", action="store_true", help="only the success table at 100 base faces")
+    ap.add_argument("--meshlab", action="store_true", help="only the MeshLab isoparametrization comparison")
+    ap.add_argument("--scaling", action="store_true", help="only the scaling table")
     a = ap.parse_args()
     jp.config.progress = False                    # tables only (the remesh's pull-back has a bar)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+          f"load {_load()}")
+    if a.meshlab:
+        meshlab(jp)
+        return 0
+    if a.scaling:
+        scaling_table(jp, a.big)
+        return 0
     success_table(jp, "maps", (100,) if a.quick else (50, 100, 200, 400))
     if a.quick:
         return 0

@@ -159,10 +159,41 @@ def test_bad_input_is_refused_before_any_work_with_the_place_named():
     s = jp.shapes.sphere(1)
     V = np.concatenate([np.asarray(s.vertices), np.asarray(s.vertices) + 3])
     two = jp.TriMesh(V, np.concatenate([s.faces, s.faces + s.n_vertices]))
-    with pytest.raises(TopologyError, match=r"2 connected components"):
+    with pytest.raises(TopologyError, match=r"2 connected components.*manifold_map_each"):
         manifold_map(two, 20)
     with pytest.raises(MeshError, match="unknown method"):
         manifold_map(s, 20, method="lscm")
+
+
+def test_several_components_are_parameterized_one_at_a_time():
+    from jaxparam.manifold import manifold_map_each
+
+    a, b = jp.shapes.torus(16, 8), jp.shapes.sphere(1)           # 256 and 80 faces
+    V = np.concatenate([np.asarray(b.vertices) + 5.0, np.asarray(a.vertices)])
+    F = np.concatenate([b.faces, a.faces + b.n_vertices])
+    mesh = jp.TriMesh(V, F)
+    parts = manifold_map_each(mesh, 80)
+    # Largest first; the total shared by faces (80 * 256 / 336 -> 60, 80 * 80 / 336 -> 20).
+    assert [p.base.n_faces for p in parts] == [60, 20]
+    assert [p.param.mesh.topology.genus for p in parts] == [1, 0]
+    for p in parts:
+        np.testing.assert_array_equal(np.asarray(p.param.mesh.vertices), V[p.vertices])
+        np.testing.assert_array_equal(p.vertices[p.param.mesh.faces], F[p.faces])
+        t = p.param.remesh(2).mesh.topology
+        assert t.is_closed and t.n_components == 1 and t.genus == p.param.mesh.topology.genus
+    assert sorted(np.concatenate([p.faces for p in parts]).tolist()) == list(range(F.shape[0]))
+    # One count per component; a count a component cannot take is named before any work.
+    assert [p.base.n_faces for p in manifold_map_each(mesh, [40, 20])] == [40, 20]
+    with pytest.raises(MeshError, match=r"component 1 .*genus 0, 80 faces.*got 3"):
+        manifold_map_each(mesh, [40, 3])
+    with pytest.raises(MeshError, match=r"2 counts for a mesh of 3 components"):
+        manifold_map_each(jp.TriMesh(np.concatenate([V, V[:b.n_vertices] + 9]),
+                                     np.concatenate([F, b.faces + V.shape[0]])), [40, 20])
+    # A component with a hole is refused, with the component named.
+    g = jp.shapes.graph_surface(6)
+    holed = jp.TriMesh(np.concatenate([V, np.asarray(g.vertices) + 20]), np.concatenate([F, g.faces + V.shape[0]]))
+    with pytest.raises(TopologyError, match=r"component 2 .*boundary loop"):
+        manifold_map_each(holed, 80)
 
 
 def test_with_vertices_moves_the_remesh_with_the_positions():

@@ -16,6 +16,9 @@ Two routes (``manifold_map(..., method=)``):
 - ``"paths"``: the method of Floater, Hormann and Reimers (ref. [11]) described below; it
   can fail with a :class:`~jaxparam.SolverError` where paths are walled off.
 
+A mesh of several closed components: :func:`manifold_map_each`
+(:mod:`~jaxparam.manifold.components`) parameterizes each over a base domain of its own.
+
 The method of Floater, Hormann and Reimers (the survey's ref. [11]), in four steps, one
 module each:
 
@@ -58,6 +61,7 @@ Python loops over collapses and paths; everything per vertex or per face is vect
 from __future__ import annotations
 
 from .charts import REFERENCE
+from .components import ComponentMap, manifold_map_each, split_components
 from .decimate import decimate
 from .maps import MapsHistory, maps_decimate
 from .parameterization import METHODS, ManifoldParameterization, ManifoldStructure, fewest_faces, manifold_map
@@ -65,4 +69,4 @@ from .report import ManifoldReport, check_closed_manifold, fidelity
 
 __all__ = ["REFERENCE", "decimate", "maps_decimate", "MapsHistory", "METHODS", "ManifoldParameterization",
            "ManifoldStructure", "fewest_faces", "manifold_map", "ManifoldReport", "check_closed_manifold",
-           "fidelity"]
+           "fidelity", "ComponentMap", "manifold_map_each", "split_components"]

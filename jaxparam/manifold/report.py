@@ -39,8 +39,8 @@ def check_closed_manifold(mesh, where: str = "manifold_map") -> None:
         raise TopologyError(
             f"{where}: the mesh has {t.n_components} connected components (of "
             f"{first_few(np.sort(sizes)[::-1].tolist())} vertices; they contain vertices "
-            f"{reps}); parameterize each on its own (split the faces by "
-            "mesh.topology.components).")
+            f"{reps}); parameterize each on its own with "
+            "jp.manifold.manifold_map_each(mesh, base_faces), one base domain per component.")
     unused = np.flatnonzero(~t.referenced)
     if unused.size:
         raise MeshError(f"{where}: vertices {first_few(unused.tolist())} belong to no face; "
