@@ -12,7 +12,9 @@ faces, UVs):
   charts count as they look);
 - max s1/s2; covered: UV area over the unit square's; mirrored: charts (and their faces)
   whose signed UV area is negative; flips: faces of negative signed UV area inside charts
-  of positive total area; seconds: wall time (compilation included for jaxparam).
+  of positive total area; overlaps: boundary edges of two charts that cross, plus charts
+  lying inside another (:func:`chart_overlaps`, no use of the packer); seconds: wall time (compilation included for jaxparam); load: the 1-minute load average
+  after the run.
 
 Usage::
 
@@ -20,12 +22,14 @@ Usage::
     python benchmarks/atlas.py bunny.off cow.off     # some of them
     python benchmarks/atlas.py --big                 # also the ~1M-face refined cow
     python benchmarks/atlas.py --no-xatlas ...       # jaxparam only
+    python benchmarks/atlas.py --big --xatlas-cap 600  # stop xatlas after 600 s
 
 xatlas is a benchmark-only extra (``pip install xatlas``); the engine never imports it.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,9 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-import jaxparam as jp
-from jaxparam.atlas import atlas
-
+# jaxparam is imported where it is used, so the xatlas child process does not load it
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "meshes"
 
 
@@ -87,10 +89,65 @@ def measure(V, F, uv, T) -> dict:
     return {"charts": k, "seam": seam / np.sqrt(a3.sum()), "E_sd": float(np.sum(sd * a3) / a3.sum()),
             "max_aspect": float(np.max(aspect)), "covered": float(np.abs(auv).sum()),
             "mirrored": int(mirrored.sum()), "mirrored_faces": int(np.sum(mirrored[lab])),
-            "flips": flips}
+            "flips": flips, "overlaps": chart_overlaps(uv, T, lab)}
+
+
+def chart_overlaps(uv, T, lab) -> int:
+    """Overlaps between charts, checked without the packer: pairs of boundary edges of
+    different charts that cross (grid-bucketed segment tests), plus charts one of whose
+    vertices lies strictly inside another chart's triangle.  ``uv (n, 2)``, ``T (m, 3)``,
+    ``lab (m,)`` the chart of each face."""
+    h = np.stack([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]], 1).reshape(-1, 2)
+    own = np.repeat(lab, 3)
+    n = uv.shape[0]
+    key, twin = h[:, 0] * n + h[:, 1], h[:, 1] * n + h[:, 0]
+    lone = ~np.isin(twin, key)
+    E, oc = h[lone], own[lone]
+    A, B = uv[E[:, 0]], uv[E[:, 1]]
+    cell = max(float(np.median(np.linalg.norm(B - A, axis=1))) * 2, 1e-9)
+    lo = np.floor(np.minimum(A, B) / cell).astype(np.int64)
+    hi = np.floor(np.maximum(A, B) / cell).astype(np.int64)
+    cnt = (hi - lo + 1).prod(1)
+    e = np.repeat(np.arange(len(E)), cnt)
+    k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    wx = (hi - lo + 1)[e, 0]
+    cx, cy = lo[e, 0] + k % wx, lo[e, 1] + k // wx
+    ck = cx * 1000003 + cy
+    o = np.argsort(ck, kind="stable")
+    ck, e = ck[o], e[o]
+    starts = np.flatnonzero(np.r_[True, ck[1:] != ck[:-1]])
+    sizes = np.diff(np.r_[starts, ck.size])
+    pairs = []
+    for sz in np.unique(sizes[sizes > 1]):
+        st = starts[sizes == sz]
+        ii, jj = np.triu_indices(sz, 1)
+        pairs.append(np.stack([e[st[:, None] + ii], e[st[:, None] + jj]], -1).reshape(-1, 2))
+    crossings = 0
+    if pairs:
+        P = np.unique(np.sort(np.concatenate(pairs), 1), axis=0)
+        P = P[oc[P[:, 0]] != oc[P[:, 1]]]
+        a, b, c, d = A[P[:, 0]], B[P[:, 0]], A[P[:, 1]], B[P[:, 1]]
+        cr = lambda o, p, q: (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (q[:, 0] - o[:, 0])
+        d1, d2, d3, d4 = cr(a, b, c), cr(a, b, d), cr(c, d, a), cr(c, d, b)
+        crossings = int(np.sum((d1 * d2 < 0) & (d3 * d4 < 0)))
+    # the centroid of one triangle per chart strictly inside a triangle of another chart
+    first = np.unique(lab, return_index=True)[1]
+    Q = uv[T]
+    q = Q[first].mean(1)
+    inside = 0
+    for kk in range(0, len(first), 64):
+        p = q[kk:kk + 64, None, :]
+        s = [(Q[None, :, (t + 1) % 3, 0] - Q[None, :, t, 0]) * (p[..., 1] - Q[None, :, t, 1])
+             - (Q[None, :, (t + 1) % 3, 1] - Q[None, :, t, 1]) * (p[..., 0] - Q[None, :, t, 0]) for t in range(3)]
+        s = np.stack(s, -1)
+        hit = (np.all(s > 0, -1) | np.all(s < 0, -1)) & (lab[None, :] != lab[first[kk:kk + 64], None])
+        inside += int(hit.any(1).sum())
+    return crossings + inside
 
 
 def run_jaxparam(mesh) -> dict:
+    from jaxparam.atlas import atlas
+
     t0 = time.perf_counter()
     a = atlas(mesh)
     dt = time.perf_counter() - t0
@@ -99,18 +156,36 @@ def run_jaxparam(mesh) -> dict:
     return r
 
 
-def run_xatlas(mesh) -> dict:
+def _xatlas_child(src: str, dst: str) -> None:
+    """Run xatlas on the mesh in ``src`` (npz: V, F) and save its UVs to ``dst``."""
     import xatlas
 
-    V = np.asarray(mesh.vertices, np.float64)
+    d = np.load(src)
     t0 = time.perf_counter()
     at = xatlas.Atlas()
-    at.add_mesh(V.astype(np.float32), mesh.faces.astype(np.uint32))
+    at.add_mesh(d["V"].astype(np.float32), d["F"].astype(np.uint32))
     at.generate()
     vmap, idx, uvs = at[0]
-    dt = time.perf_counter() - t0
-    r = measure(V, mesh.faces, uvs.astype(np.float64), idx.astype(np.int64))
-    r["seconds"] = dt
+    np.savez(dst, uv=uvs.astype(np.float64), idx=idx.astype(np.int64), seconds=time.perf_counter() - t0)
+
+
+def run_xatlas(mesh, cap: float = 900.0) -> dict:
+    """xatlas with default options, in a child process stopped after ``cap`` seconds
+    (native code cannot be interrupted otherwise); ``{"capped": cap}`` when stopped."""
+    import subprocess
+    import tempfile
+
+    V = np.asarray(mesh.vertices, np.float64)
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst = str(Path(tmp) / "in.npz"), str(Path(tmp) / "out.npz")
+        np.savez(src, V=V, F=mesh.faces)
+        try:
+            subprocess.run([sys.executable, __file__, "--xatlas-child", src, dst], check=True, timeout=cap)
+        except subprocess.TimeoutExpired:
+            return {"capped": cap}
+        d = np.load(dst)
+        r = measure(V, mesh.faces, d["uv"], d["idx"])
+        r["seconds"] = float(d["seconds"])
     return r
 
 
@@ -119,27 +194,44 @@ def main(argv=None) -> None:
     ap.add_argument("meshes", nargs="*", help="file names in ../shared/data/meshes (default: all)")
     ap.add_argument("--big", action="store_true", help="also a ~1M-face refined cow")
     ap.add_argument("--no-xatlas", action="store_true")
+    ap.add_argument("--xatlas-cap", type=float, default=900.0,
+                    help="seconds after which xatlas is stopped (it can take hours at 1M faces)")
+    ap.add_argument("--xatlas-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.xatlas_child:
+        _xatlas_child(*args.xatlas_child)
+        return
+    import jaxparam as jp
+
     names = args.meshes or sorted(p.name for p in DATA.iterdir())
     cases = [(nm, lambda nm=nm: jp.load(DATA / nm)) for nm in names]
     if args.big:
         cases.append(("cow x256 (refined)", lambda: jp.shapes.refine(jp.load(DATA / "cow.off"), 4)))
     print("| mesh | faces | tool | charts | seam/sqrt(A) | E_sd (iso 2) | max s1/s2 | covered | "
-          "mirrored charts (faces) | flips | seconds |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "mirrored charts (faces) | flips | overlaps | seconds | load |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, make in cases:
-        mesh = make()
-        tools = [("jaxparam", run_jaxparam)] + ([] if args.no_xatlas else [("xatlas", run_xatlas)])
+        try:
+            mesh = make()
+        except Exception as exc:       # e.g. a non-manifold file: the library refuses it
+            print(f"| {name} | | | not loaded: {type(exc).__name__}: {str(exc)[:120]} |", flush=True)
+            continue
+        tools = [("jaxparam", run_jaxparam)] + ([] if args.no_xatlas else [
+            ("xatlas", lambda m: run_xatlas(m, args.xatlas_cap))])
         for tool, fn in tools:
             try:
                 r = fn(mesh)
             except Exception as exc:       # report and go on: a benchmark prints a table
                 print(f"| {name} | {mesh.n_faces} | {tool} | failed: {type(exc).__name__}: {exc} |")
                 continue
+            if "capped" in r:
+                print(f"| {name} | {mesh.n_faces:,} | {tool} | stopped after {r['capped']:.0f} s "
+                      f"| | | | | | | | > cap | {os.getloadavg()[0]:.1f} |", flush=True)
+                continue
             print(f"| {name} | {mesh.n_faces:,} | {tool} | {r['charts']} | {r['seam']:.2f} | "
                   f"{r['E_sd']:.4f} | {r['max_aspect']:.2f} | {100 * r['covered']:.1f} % | "
-                  f"{r['mirrored']} ({r['mirrored_faces']}) | {r['flips']} | {r['seconds']:.1f} |",
-                  flush=True)
+                  f"{r['mirrored']} ({r['mirrored_faces']}) | {r['flips']} | {r['overlaps']} | {r['seconds']:.1f} | "
+                  f"{os.getloadavg()[0]:.1f} |", flush=True)
 
 
 if __name__ == "__main__":

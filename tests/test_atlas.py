@@ -154,6 +154,44 @@ def test_packing_keeps_margin_and_orientation():
     assert area * P.scale ** 2 >= 0.6
 
 
+def test_place_square_fills_holes_and_keeps_margins():
+    # a U-shaped mask, then blobs: the small ones go into the U's cavity (the bounding
+    # square does not grow), and no two placed masks come within the margin
+    U = np.ones((40, 40), bool)
+    U[8:, 12:28] = False
+    rng = np.random.default_rng(3)
+    masks = [U]
+    for r in rng.uniform(2.5, 9.0, 14):
+        y, x = np.mgrid[: int(2 * r) + 1, : int(2 * r) + 1] - r
+        masks.append(x ** 2 + (1.6 * y) ** 2 <= r ** 2)
+    margin = 2
+    pos, turn, side = pack.place_square(masks, 120, margin)
+    cap = 120
+    placed = []
+    for c, M in enumerate(masks):
+        Mt = pack._turns(M)[turn[c]][0]
+        G = np.zeros((cap, cap), bool)
+        i, j = pos[c]
+        G[j:j + Mt.shape[0], i:i + Mt.shape[1]] = Mt
+        placed.append(G)
+    from scipy import ndimage
+    st = np.ones((2 * margin + 1, 2 * margin + 1), bool)
+    for a in range(len(placed)):
+        grown = ndimage.binary_dilation(placed[a], st)
+        others = np.any([placed[b] for b in range(len(placed)) if b != a], axis=0)
+        assert not np.any(grown & others), a
+    occupied = np.any(placed, axis=0)
+    assert side == max(np.flatnonzero(occupied.any(0))[-1], np.flatnonzero(occupied.any(1))[-1]) + 1
+    # the U's cavity holds at least one blob: cells inside the U's box but not the U
+    cavity = np.zeros((cap, cap), bool)
+    i, j = pos[0]
+    Ut = pack._turns(U)[turn[0]][0]
+    cavity[j:j + Ut.shape[0], i:i + Ut.shape[1]] = ~Ut
+    assert np.any(occupied & cavity)
+    total = sum(int(M.sum()) for M in masks)
+    assert total / side ** 2 >= 0.45
+
+
 # ---------------------------------------------------------------- atlases
 
 def test_sphere_atlas():
@@ -179,6 +217,25 @@ def test_charts_are_disks_on_a_torus_without_flattening():
         assert t.n_components == 1 and len(t.boundary_loops) == 1 and t.genus == 0
 
 
+def test_small_chart_merge_keeps_disks_and_only_merges_small_charts():
+    mesh = jp.shapes.torus(24, 12)
+    t = mesh.topology
+    base = ch.segment(mesh, cone=40.0)
+    wide = ch.segment(mesh, cone=40.0, small_cone=100.0, small_area=0.05)
+    assert ch.disk_flags(t, wide).all()
+    assert wide.max() < base.max()
+    # before smoothing, a second merge leaves every chart above the threshold as it was
+    normals, areas = ch.face_normals(np.asarray(mesh.vertices), t.faces)
+    adj = ch.face_adjacency(t)
+    c0 = ch.relabel(base)
+    big = np.bincount(c0, weights=areas) > 0.05 * areas.sum()
+    c1 = ch.merge_charts(c0, normals, areas, adj, t.faces, cone=100.0, max_area=0.05 * areas.sum())
+    for k in np.flatnonzero(big):
+        own = np.unique(c1[c0 == k])
+        assert own.size == 1                     # a big chart is never split up or moved
+        assert np.all(np.isin(c0[c1 == own[0]], np.r_[k, np.flatnonzero(~big)]))
+
+
 def test_atlas_refuses_bad_input():
     mesh = jp.shapes.sphere(1)
     with pytest.raises(jp.MeshError, match="texture_size"):
@@ -187,6 +244,8 @@ def test_atlas_refuses_bad_input():
         atlas(mesh, cone=200)
     with pytest.raises(jp.MeshError, match="merge_cone"):
         atlas(mesh, merge_cone=0.0)
+    with pytest.raises(jp.MeshError, match="small_merge_cone"):
+        atlas(mesh, small_merge_cone=180.0)
     with pytest.raises(jp.MeshError, match="tracers"):
         jax.grad(lambda X: jnp.sum(atlas(jp.TriMesh(X, mesh.faces)).uv))(jnp.asarray(mesh.vertices))
     # a non-manifold mesh is refused by the library before any atlas work

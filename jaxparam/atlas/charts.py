@@ -243,9 +243,11 @@ def faces_are_disk(F: np.ndarray) -> bool:
     return bool(np.all(deg == 2))
 
 
-def merge_charts(chart, normals, areas, adj, faces, *, cone: float) -> np.ndarray:
+def merge_charts(chart, normals, areas, adj, faces, *, cone: float,
+                 max_area: float | None = None) -> np.ndarray:
     """Merge neighbouring charts, smallest first, into the neighbour of largest area whose
-    union is a disk within the cone (step 2).  Loops over charts, not faces."""
+    union is a disk within the cone (step 2); with ``max_area``, only charts of at most
+    that 3D area merge into a neighbour.  Loops over charts, not faces."""
     chart = relabel(chart)
     cos_t = np.cos(np.radians(cone))
     for _ in range(4):
@@ -265,7 +267,7 @@ def merge_charts(chart, normals, areas, adj, faces, *, cone: float) -> np.ndarra
             nbrs[int(q)].add(int(p))
         merged_any = False
         for s in np.argsort(area_c).tolist():
-            if s not in members:
+            if s not in members or (max_area is not None and area_c[s] > max_area):
                 continue
             cands = sorted(nbrs[s], key=lambda q: -area_c[q])
             for q in cands:
@@ -354,11 +356,14 @@ def keep_disks(topology, before: np.ndarray, after: np.ndarray, *, rounds: int =
     return after
 
 
-def segment(mesh, *, cone: float = 60.0, merge_cone: float | None = None) -> np.ndarray:
+def segment(mesh, *, cone: float = 60.0, merge_cone: float | None = None,
+            small_cone: float | None = None, small_area: float = 0.01) -> np.ndarray:
     """Charts of a mesh: ``chart (m,) int`` labels ``0..c-1``, every chart a disk.
 
     **Arguments:** ``mesh`` (concrete vertices); ``cone`` in degrees (grow step);
-    ``merge_cone`` (merge step; default ``cone``).
+    ``merge_cone`` (merge step; default ``cone``); ``small_cone``: a second merge step in
+    which only charts under ``small_area`` of the total area merge, within this wider
+    cone (``None``: no second step).
     """
     t = mesh.topology
     V = np.asarray(mesh.vertices, np.float64)
@@ -368,5 +373,8 @@ def segment(mesh, *, cone: float = 60.0, merge_cone: float | None = None) -> np.
     adj_csr = _csr(adj, t.n_faces)
     chart = make_disks(t, chart, adj_csr)
     chart = merge_charts(chart, normals, areas, adj, t.faces, cone=merge_cone or cone)
+    if small_cone is not None:
+        chart = merge_charts(chart, normals, areas, adj, t.faces, cone=small_cone,
+                             max_area=small_area * float(areas.sum()))
     chart = keep_disks(t, chart, smooth_charts(chart, face_neighbours(t)))
     return make_disks(t, chart, adj_csr)

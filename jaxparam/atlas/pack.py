@@ -2,16 +2,22 @@
 
 Each chart is first turned (a proper rotation, never a mirror) so that its minimal-area
 bounding rectangle is axis-aligned (rotating calipers on the convex hull).  The packer
-then works on a raster of ``texture_size`` cells a side: each chart is rasterized
-conservatively (every cell its triangles touch, by the separating-axis test), charts are
-placed largest first at the lowest, then leftmost, free position (found for all
-positions at once by an FFT correlation of the chart's mask with the occupancy), trying
-the chart in its four proper turns (0, 90, 180, 270 degrees).  The occupancy holds every placed chart
-dilated by the margin, so two charts are at least ``margin_texels`` texels apart.  The
-scale (UV units per 3D unit, one for all charts, so texel density is uniform) is found by
-bisection on a coarse raster whose cells are ``f x f`` texels (a coarse placement is valid
-at full size too), then tried at full size 3 % larger, then 6 % or 1.5 % (the coarse
-placement is the fallback).
+then works on a raster whose cells are ``f x f`` texels (``f`` the largest power of two
+that divides the texture size and leaves at least 512 cells a side; 512 cells for a 1024
+or 2048 texture): each chart is rasterized conservatively
+(every cell its boundary touches, and the cells inside), and charts are placed largest
+first, each at the free position that keeps the bounding square of the charts placed so
+far smallest (then the smallest bounding rectangle, then the lowest, then the leftmost),
+over its four proper turns (0, 90, 180, 270 degrees).  The occupancy holds every placed
+chart dilated by the margin.  Inside the current bounding rectangle, free positions are
+sifted with a few of the mask's boundary cells and checked with all of them, then with
+the whole mask (:func:`_inside`); when none is free there, all positions are tested at
+once by an FFT correlation of the mask with the occupancy (:func:`_anywhere`).  The bounding square (side ``S`` cells) is then scaled onto
+``[0, 1]^2``: a cell becomes ``texture_size / S >= f`` texels, so two charts stay at
+least ``margin_texels`` texels apart.  The scale (UV units per 3D unit, one for all
+charts, so texel density is uniform) starts from the charts' area and is corrected from
+each packing's side, so that ``S`` comes close to (and not above) the raster's size: a
+few packings in all, not a bisection.
 """
 from __future__ import annotations
 
@@ -21,7 +27,7 @@ import numpy as np
 
 from ..errors import SolverError
 
-__all__ = ["Packing", "min_area_rotation", "rasterize", "pack_charts"]
+__all__ = ["Packing", "min_area_rotation", "rasterize", "pack_charts", "place_square"]
 
 
 @dataclass(frozen=True)
@@ -30,7 +36,7 @@ class Packing:
 
     **Fields:** ``rotation (c, 2, 2)`` (proper rotations: det +1), ``origin (c, 2)``,
     ``offset (c, 2)``, ``scale`` (UV units per 3D length unit), ``texture_size``,
-    ``margin_texels``, ``attempts`` (scales tried).
+    ``margin_texels``, ``attempts`` (packings tried).
     """
 
     rotation: np.ndarray
@@ -162,74 +168,139 @@ def _turns(M):
             (np.rot90(M, 1), np.array([[0.0, 1.0], [-1.0, 0.0]]), (0.0, w)))     # (v, w - u)
 
 
-def _place(masks, size, margin):
-    """Place masks (largest first) in a ``size x size`` grid at the lowest, then leftmost
-    free position over the four proper turns; ``None`` if one does not fit, else
-    ``(positions (c, 2) cells [u, v], turn (c,) int)``."""
-    from scipy import fft, ndimage
+def _inside(turns, occb, W, H, samples: int = 24, chunk: int = 512, chunks: int = 8):
+    """The lowest, then leftmost free position inside the current bounding rectangle
+    ``W x H`` over the turns, or ``None`` (then :func:`_anywhere` searches).
 
-    occ = np.zeros((size, size), np.float32)
-    top = 0
+    The mask's boundary cells (those with a cell outside among their eight neighbours)
+    are tested first: a few sift the positions (shifted ANDs), all of them check the
+    survivors in row order, and the whole mask checks the first positions whose boundary
+    is free (a placed mask could lie inside the new one's interior; when masks are placed
+    largest first it cannot).  After ``chunks`` chunks of survivors the caller falls back
+    to the FFT search.  **Returns:** ``(key, turn, i, j, mask)`` or ``None``.
+    """
+    from scipy import ndimage
+
+    best = None
+    for t, (M, _, _) in enumerate(turns):
+        h, w = M.shape
+        jn, in_ = H - h + 1, W - w + 1
+        if jn <= 0 or in_ <= 0:
+            continue
+        rim = M & ~ndimage.binary_erosion(M, np.ones((3, 3), bool), border_value=0)
+        by, bx = np.nonzero(rim)
+        if by.size == 0:
+            continue
+        pick = np.unique(np.linspace(0, by.size - 1, min(samples, by.size)).astype(np.int64))
+        cand = np.ones((jn, in_), bool)
+        for y, x in zip(by[pick], bx[pick]):
+            cand &= ~occb[y:y + jn, x:x + in_]
+        idx = np.flatnonzero(cand)
+        if best is not None:                  # only positions before the best so far
+            idx = idx[idx // in_ * (1 << 12) + idx % in_ < best[0]]
+        found = None
+        for k in range(0, min(idx.size, chunk * chunks), chunk):
+            jj, ii = np.divmod(idx[k:k + chunk], in_)
+            hit = occb[jj[:, None] + by[None], ii[:, None] + bx[None]].any(1)
+            for b in np.flatnonzero(~hit)[:4]:     # a free rim; the whole mask decides
+                if not np.any(occb[jj[b]:jj[b] + h, ii[b]:ii[b] + w] & M):
+                    found = (int(jj[b]), int(ii[b]))
+                    break
+            if found is not None:
+                break
+        if found is None:
+            if idx.size > chunk * chunks:
+                return None                   # too many to check: the exact search decides
+            continue
+        j, i = found
+        key = (j << 12) + i
+        if best is None or key < best[0]:
+            best = (key, t, i, j, M)
+    return best
+
+
+def _anywhere(turns, occ, W, H, cap, margin):
+    """The free position of least ``(square side, rectangle area, row, column)`` over the
+    turns, all positions tested by an FFT correlation with the occupancy ``occ``.
+    **Returns:** ``(key, turn, i, j, mask)`` or ``None``."""
+    from scipy import fft
+
+    L = max(turns[0][0].shape)
+    # positions j <= H + margin, i <= W + margin suffice (beyond, the square only grows)
+    R, C = min(cap, H + margin + L), min(cap, W + margin + L)
+    shape = (fft.next_fast_len(R, True), fft.next_fast_len(C, True))
+    F_occ = fft.rfft2(occ[:R, :C], shape)
+    best = None
+    for t, (M, _, _) in enumerate(turns):
+        h, w = M.shape
+        if not M.any():
+            continue
+        jm, im = min(H + margin, cap - h), min(W + margin, cap - w)
+        ov = fft.irfft2(F_occ * np.conj(fft.rfft2(M.astype(np.float32), shape)), shape)
+        fj, fi = np.nonzero(ov[:jm + 1, :im + 1] < 0.5)
+        if fj.size == 0:
+            continue
+        W2, H2 = np.maximum(W, fi + w), np.maximum(H, fj + h)
+        key = ((np.maximum(W2, H2).astype(np.int64) << 24) + W2 * H2) * (1 << 24) + (fj << 12) + fi
+        b = int(np.argmin(key))
+        if best is None or key[b] < best[0]:
+            best = (key[b], t, int(fi[b]), int(fj[b]), M)
+    return best
+
+
+def place_square(masks, cap: int, margin: int, order: np.ndarray | None = None):
+    """Place masks (largest first) on a ``cap x cap`` raster, each at the free position
+    (over its four proper turns) that keeps the bounding square of the masks placed so far
+    smallest; ties go to the smaller bounding rectangle, then the lowest, then the
+    leftmost position.  Masks are at least ``margin`` cells apart.  ``order``: the order of
+    placement (default: decreasing mask area).
+
+    **Returns:** ``None`` if one does not fit, else ``(positions (c, 2) cells [u, v],
+    turn (c,) int, side)``, ``side`` the bounding square's in cells.
+    """
+    from scipy import ndimage
+
+    occ = np.zeros((cap, cap), np.float32)
+    occb = np.zeros((cap, cap), bool)
+    W = H = 0
     pos = np.zeros((len(masks), 2), np.int64)
     turn = np.zeros(len(masks), np.int64)
     st = np.ones((2 * margin + 1, 2 * margin + 1), bool) if margin else None
-    order = np.argsort([-m.sum() for m in masks], kind="stable")
+    if order is None:
+        order = np.argsort([-m.sum() for m in masks], kind="stable")
     for c in order:
-        best = None
-        h0, w0 = masks[c].shape
-        L = max(h0, w0)
-        rows = min(size, top + L)
-        shape = (fft.next_fast_len(rows + L, True), fft.next_fast_len(size + L, True))
-        F_occ = fft.rfft2(occ[:rows], shape)
-        for t, (M, _, _) in enumerate(_turns(masks[c])):
-            h, w = M.shape
-            if h > size or w > size or not M.any():
-                continue
-            ov = fft.irfft2(F_occ * np.conj(fft.rfft2(M.astype(np.float32), shape)), shape)
-            nrow = size - h + 1
-            free = np.ones((nrow, size - w + 1), bool)
-            k = min(nrow, max(rows - h + 1, 0))
-            free[:k] = ov[:k, : size - w + 1] < 0.5
-            if not free.any():
-                continue
-            j = int(np.argmax(free.any(1)))
-            i = int(np.argmax(free[j]))
-            score = (j, j + h, i)
-            if best is None or score < best[0]:
-                best = (score, t, i, j, M)
+        L = max(masks[c].shape)
+        if L > cap:
+            return None
+        turns = _turns(masks[c])
+        best = _inside(turns, occb, W, H)
+        if best is None:
+            best = _anywhere(turns, occ, W, H, cap, margin)
         if best is None:
             return None
         _, t, i, j, M = best
         h, w = M.shape
         # the occupancy keeps the mask grown by `margin` cells on each side
-        pad = np.pad(M, margin) if margin else M
-        D = ndimage.binary_dilation(pad, st) if margin else pad
+        D = ndimage.binary_dilation(np.pad(M, margin), st) if margin else M
         j0, i0 = j - margin, i - margin
         js, is_ = max(j0, 0), max(i0, 0)
-        je, ie = min(j0 + D.shape[0], size), min(i0 + D.shape[1], size)
-        occ[js:je, is_:ie] = np.maximum(occ[js:je, is_:ie], D[js - j0:je - j0, is_ - i0:ie - i0])
-        top = max(top, min(size, j + h + margin))
+        je, ie = min(j0 + D.shape[0], cap), min(i0 + D.shape[1], cap)
+        occb[js:je, is_:ie] |= D[js - j0:je - j0, is_ - i0:ie - i0]
+        occ[js:je, is_:ie] = occb[js:je, is_:ie]
+        W, H = max(W, i + w), max(H, j + h)
         pos[c] = (i, j)
         turn[c] = t
-    return pos, turn
-
-
-def _try(local, seg, seg_of, scale, size, margin):
-    """``(masks, placement or None)`` at ``scale`` (UV units per 3D unit) on a raster of
-    ``size`` cells."""
-    masks = _chart_masks(local, seg, seg_of, scale * size)
-    if sum(int(M.sum()) for M in masks) > 0.97 * size ** 2:      # cannot fit
-        return masks, None
-    return masks, _place(masks, size, margin)
+    return pos, turn, max(W, H, 1)
 
 
 def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 1024,
-                margin_texels: int = 2, fill: float = 0.9, max_attempts: int = 14) -> Packing:
+                margin_texels: int = 2, fill: float = 0.72, max_attempts: int = 5) -> Packing:
     """Pack the charts' UVs (``uv (n_uv, 2)`` at 3D scale) into ``[0, 1]^2``.
 
     **Arguments:** ``uv_faces (m, 3)``, ``chart (m,)`` face charts, ``uv_chart (n_uv,)``,
-    ``area3d`` (total UV area of the charts at their own scale); ``texture_size`` (cells a side),
-    ``margin_texels``; ``fill``: the share of the square the first scale tries to cover.
+    ``area3d`` (total UV area of the charts at their own scale); ``texture_size`` (texels a
+    side), ``margin_texels``; ``fill``: the share of the raster the first scale expects
+    to cover; ``max_attempts``: packings tried at most.
     **Returns:** a :class:`Packing`.
     """
     k = int(chart.max()) + 1
@@ -248,43 +319,37 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
         Q = uv[ids] @ R.T
         rot[c], origin[c] = R, np.linalg.solve(R, Q.min(0))
         local[ids] = Q - Q.min(0)
-    # the scale: bisection on a coarse raster (its cells are f x f texels, so a coarse
-    # placement is also valid at full size), then one or two tries at full size
+    # the raster: cells of f x f texels, 512 a side for a 1024 texture; a packing of side S <= size
+    # cells maps a cell onto texture_size / S >= f texels, so m cells keep the margin
     f = 1
-    while texture_size // (2 * f) >= 192 and texture_size % (2 * f) == 0:
+    while texture_size // (2 * f) >= 512 and texture_size % (2 * f) == 0:
         f *= 2
-    cs, cm = texture_size // f, int(np.ceil(margin_texels / f))
-    scale = np.sqrt(fill / area3d)
-    lo, hi, best = None, None, None
+    size, m = texture_size // f, int(np.ceil(margin_texels / f))
+    cap = int(np.ceil(1.3 * size))
+    s = size * np.sqrt(fill / area3d)            # cells per 3D unit
+    best = None
     attempt = 0
-    while attempt < max_attempts and (lo is None or hi is None or hi / lo > 1.01):
+    while attempt < max_attempts:
         attempt += 1
-        s_try = scale if lo is None and hi is None else (
-            np.sqrt(lo * hi) if lo is not None and hi is not None else (lo * 1.1 if hi is None else hi * 0.85))
-        masks, placed = _try(local, seg, seg_of, s_try, cs, cm)
+        masks = _chart_masks(local, seg, seg_of, s)
+        placed = place_square(masks, cap, m)
         if placed is None:
-            hi = s_try
-        else:
-            lo, best = s_try, (masks, placed, cs)
+            s *= 0.8
+            continue
+        side = placed[2]
+        if side <= size and (best is None or s / side > best[0]):
+            best = (s / side, s, masks, placed)
+        if 0.97 * size <= side <= size:
+            break
+        s *= size / side * (0.995 if side > size else 1.0)
     if best is None:
         raise SolverError(f"pack_charts: the {k} charts did not fit into the unit square after "
-                          f"{attempt} scales; lower margin_texels or raise texture_size.",
+                          f"{attempt} packings; lower margin_texels or raise texture_size.",
                           stage="pack")
-    scale = lo
-    if f > 1:
-        # the coarse placement at lo is valid at full size already; two full-size tries
-        # above it: 3 % larger, then 6 % if that fits, else 1.5 %
-        for step in (1.03, None):
-            step = step or (1.06 if scale > lo else 1.015)
-            attempt += 1
-            masks, placed = _try(local, seg, seg_of, lo * step, texture_size, margin_texels)
-            if placed is not None:
-                scale, best = lo * step, (masks, placed, texture_size)
-    masks, (pos, turn), size = best
-    cell = 1.0 / size
+    scale, _, masks, (pos, turn, side) = best
     offset = np.zeros((k, 2))
     for c in range(k):
         _, Rt, tr = _turns(masks[c])[turn[c]]
         rot[c] = Rt @ rot[c]
-        offset[c] = (pos[c] + np.asarray(tr, float)) * cell
+        offset[c] = (pos[c] + np.asarray(tr, float)) / side
     return Packing(rot, origin, offset, float(scale), texture_size, margin_texels, attempt)
