@@ -15,9 +15,17 @@ pairing keeps a loaded machine's drift out of the ratio).  Two settings:
 A function that cannot be put under ``jax.jit`` is timed eagerly (marked ``eager``); one
 whose gradient fails is reported as ``failed: <reason>``.
 
+``--clock cpu`` times the process's CPU time (all threads) instead of the wall clock: on a
+machine shared with other jobs a call of a few milliseconds is preempted more often the longer
+it runs, which inflates wall-clock ratios; CPU time counts only the work.  Run it pinned to
+one core (``taskset -c 1``) so that idle worker threads spinning on a second core are not
+counted; pinned, the rows with a sparse factorization (the maps, ``minimize``) are very slow,
+so use ``--clock cpu`` for the energies (``--only energy``).
+
 Usage::
 
     python benchmarks/gradients.py [--mesh camelhead.off] [--repeats 5] [--only NAME ...]
+                                   [--clock wall|cpu]
 """
 from __future__ import annotations
 
@@ -35,8 +43,9 @@ import numpy as np
 DATA = Path(os.environ.get("JAXPARAM_DATA", "/work/shared/data/meshes"))
 
 
-def cases(mesh):
-    """``name -> f(V)`` for every differentiable public function, on ``mesh``."""
+def cases(mesh, want=lambda name: True):
+    """``name -> f(V)`` for every differentiable public function on ``mesh`` whose name
+    ``want`` accepts (the meshless maps' neighbour graph is built only when one is wanted)."""
     import jax.numpy as jnp
     import jaxparam as jp
 
@@ -50,30 +59,39 @@ def cases(mesh):
 
     # Meshless map on the mesh's vertices: the neighbour graph and the boundary are topology,
     # computed once from the concrete points and passed in (needed under jax.grad).
+    meshless = [w for w in ("inverse_distance", "mean_value", "shape_preserving")
+                if want(f"meshless_map {w}")]
     P0 = np.asarray(mesh.vertices)
-    graph = jp.points.point_graph(P0)
-    _, bnd = jp.meshless_map(P0, graph=graph)
-    bnd = np.asarray(bnd)
-    for w in ("inverse_distance", "mean_value", "shape_preserving"):
+    graph = jp.points.point_graph(P0) if meshless else None
+    bnd = np.asarray(jp.meshless_map(P0, graph=graph)[1]) if meshless else None
+    for w in meshless:
         out[f"meshless_map {w}"] = (lambda w: lambda V: jp.meshless_map(
             V, graph=graph, boundary_indices=bnd, weights=w)[0])(w)
 
     # Energies of a fixed UV as functions of the 3D positions (the total E of eq. (10)).
     uv0 = jnp.asarray(jp.convex_map(mesh, weights="mean_value"))
+    geo, F = jp.geometry, mesh.faces
     for e in ("symmetric_dirichlet", "mips", "arap", "conformal"):
         out[f"energy {e} (fixed uv)"] = (lambda e: lambda V: jp.ENERGIES[e](
             mesh.with_vertices(V), uv0))(e)
-    return out
+        # The same values through the minimizer's kernel (energies.total), which JAX
+        # differentiates itself: the hand-written derivative's baseline (issue 12).
+        out[f"energy {e} (fixed uv, JAX's derivative)"] = (lambda e: lambda V: jp.energies.total(
+            jp.ENERGIES[e], geo.local_frames(V, F), geo.face_areas(V, F), uv0[F]))(e)
+    return {k: f for k, f in out.items() if want(k)}
 
 
-def paired(fwd, grad, V, repeats, fresh):
+CLOCK = {"wall": time.perf_counter, "cpu": time.process_time}
+
+
+def paired(fwd, grad, V, repeats, fresh, clock=time.perf_counter):
     """Medians ``(forward_s, gradient_s, ratio)`` over ``repeats`` pairs of calls."""
     import jax
 
     def once(fn, X):
-        t = time.perf_counter()
+        t = clock()
         jax.block_until_ready(fn(X))
-        return time.perf_counter() - t
+        return clock() - t
 
     once(fwd, V), once(grad, V)                         # compile (or first eager run)
     rng = np.random.default_rng(0)
@@ -89,7 +107,7 @@ def paired(fwd, grad, V, repeats, fresh):
             statistics.median(b / a for a, b in zip(tf, tg)))
 
 
-def measure(f, V, repeats):
+def measure(f, V, repeats, clock=time.perf_counter):
     """``({"same": (fwd, grad, ratio), "new": (...)}, mode)``; raises on failure of either."""
     import jax
     import jax.numpy as jnp
@@ -111,8 +129,8 @@ def measure(f, V, repeats):
     g = np.asarray(grad(V))
     if not np.all(np.isfinite(g)):
         raise FloatingPointError(f"non-finite gradient ({np.sum(~np.isfinite(g))} entries)")
-    return {"same": paired(fwd, grad, V, repeats, False),
-            "new": paired(fwd, grad, V, repeats, True)}, mode
+    return {"same": paired(fwd, grad, V, repeats, False, clock),
+            "new": paired(fwd, grad, V, repeats, True, clock)}, mode
 
 
 def main() -> int:
@@ -120,6 +138,8 @@ def main() -> int:
     ap.add_argument("--mesh", default=str(DATA / "camelhead.off"))
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--only", nargs="*", help="substrings of the case names to run")
+    ap.add_argument("--clock", choices=sorted(CLOCK), default="wall",
+                    help="wall clock (default) or the process's CPU time")
     args = ap.parse_args()
 
     import jax
@@ -135,15 +155,17 @@ def main() -> int:
           f"load average at start {load:.1f}")
     mesh = jp.load(args.mesh)
     print(f"mesh: {Path(args.mesh).name}, {mesh.n_vertices} vertices, {mesh.n_faces} faces; "
-          f"medians of {args.repeats} pairs of compiled calls (forward, then gradient)")
+          f"medians of {args.repeats} pairs of compiled calls (forward, then gradient), "
+          f"{args.clock} clock")
     V = jnp.asarray(mesh.vertices, dtype=jnp.float64)
     print("| function | same V: forward s | gradient s | ratio | new V: forward s | gradient s | ratio |")
     print("|---|---:|---:|---:|---:|---:|---:|")
-    for name, f in cases(mesh).items():
-        if args.only and not any(s in name for s in args.only):
-            continue
+    def want(name):
+        return not args.only or any(s in name for s in args.only)
+
+    for name, f in cases(mesh, want).items():
         try:
-            times, mode = measure(f, V, args.repeats)
+            times, mode = measure(f, V, args.repeats, CLOCK[args.clock])
         except Exception as exc:                        # noqa: BLE001 - report and move on
             msg = str(exc).strip().splitlines()
             reason = f"{type(exc).__name__}: {msg[0][:120] if msg else ''}"

@@ -20,6 +20,13 @@ exactly conformal face JAX returns the mean of the two one-sided derivatives (th
 square root in :func:`jaxparam.geometry.singular_values` gives ``s1 - s2`` a zero
 gradient), and near one the energy's curvature grows like ``1 / (s1 - s2)``, so finite
 differences need steps well below ``s1 - s2`` (tests/test_gradients.py).
+
+**Derivatives.** The mesh energy ``energy(mesh, uv)`` of an energy of the Jacobian has a
+hand-written derivative (a ``jax.custom_jvp``, :func:`_mesh_energy`): the closed-form
+``dE/dJ`` of each form (:meth:`_SingularValueForm.value_and_dJ`), chained through the Jacobian
+and the local frame by hand.  Forward and reverse mode and Hessians all work, and agree with
+JAX's own derivative of the formula to 1e-10 (tests/test_energies.py).  The minimizer's
+kernels (:func:`total`) differentiate the densities with JAX, as before.
 """
 from __future__ import annotations
 
@@ -33,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import geometry as geo
+from . import tol
 from .errors import MeshError
 
 __all__ = ["Energy", "Densities", "energy", "ENERGIES", "get", "mips_prop2", "total",
@@ -151,10 +159,19 @@ class Energy:
         return Densities(_bind(self.density, p), _bind(self.of_J, p), _bind(self.of_sv, p))
 
     def __call__(self, mesh, uv):
-        """The mesh energy of ``uv: (n, 2)``: area-weighted mean of the density."""
-        frames = geo.local_frames(jnp.asarray(mesh.vertices), mesh.faces)
-        return total(self, frames, geo.face_areas(jnp.asarray(mesh.vertices), mesh.faces),
-                     jnp.asarray(uv)[mesh.faces])
+        """The mesh energy of ``uv: (n, 2)``: area-weighted mean of the density.
+
+        Differentiable in the vertices, the UVs and the parameters, in both modes.  For the
+        energies of the Jacobian (every named one but ``angle``, and every ``jp.energy(f)``)
+        the derivative is written by hand (:func:`_mesh_energy`): the values are the
+        density's own, bit for bit, and a gradient costs about two forward passes (three
+        times less than JAX's derivative of the same formula; benchmarks/README.md)."""
+        V = jnp.asarray(mesh.vertices)
+        if (isinstance(self.density, _OfJacobian) and V.ndim == 2 and V.shape[1] == 3
+                and isinstance(self.of_J, (_SingularValueForm, _JacobianForm))):
+            return _mesh_energy(self, V, mesh.faces, jnp.asarray(uv)[mesh.faces])
+        frames = geo.local_frames(V, mesh.faces)
+        return total(self, frames, geo.face_areas(V, mesh.faces), jnp.asarray(uv)[mesh.faces])
 
 
 def total(en: Energy, frames, areas, Q, params=None):
@@ -200,6 +217,34 @@ class _SingularValueForm:
         s1_safe = jnp.where(det > 0, s1, 1.0)
         return _barrier(det, self.fn(s1_safe, s2_safe, *params))
 
+    def value_and_dJ(self, a, b, c, d, params=()):
+        """Closed-form values and ``dE/dJ`` of ``m`` Jacobians ``[[a, b], [c, d]]`` (each
+        ``(m,)``): ``(values (m,), (dE/da, dE/db, dE/dc, dE/dd), (s1s, s2s, ok))``, as
+        JAX's derivative of :meth:`__call__` gives them (the safe square roots' zero
+        gradient at 0 included; 0 where the barrier is infinite); ``(s1s, s2s)`` are the
+        singular values ``fn`` was evaluated at and ``ok`` where the value is finite
+        (``None`` without a barrier), for the parameters' derivative."""
+        E, F = 0.5 * (a + d), 0.5 * (a - d)
+        G, H = 0.5 * (c + b), 0.5 * (c - b)
+        Q, iQ = _root(E * E + H * H)
+        R, iR = _root(F * F + G * G)
+        s1, s2 = Q + R, Q - R
+        fn = jax.vmap(jax.value_and_grad(self.fn, argnums=(0, 1)),
+                      in_axes=(0, 0) + (None,) * len(params))
+        if self.barrier:
+            ok = a * d - b * c > 0
+            s1, s2 = jnp.where(ok, s1, 1.0), jnp.where(ok, s2, 1.0)
+            y, (f1, f2) = fn(s1, s2, *params)
+            y, f1, f2 = jnp.where(ok, y, jnp.inf), jnp.where(ok, f1, 0.0), jnp.where(ok, f2, 0.0)
+        else:
+            ok = None
+            y, (f1, f2) = fn(s1, jnp.abs(s2), *params)
+            f2 = f2 * jnp.sign(s2)
+            s2 = jnp.abs(s2)
+        # s1 = Q + R, s2 = Q - R;  dQ = (E, -H, H, E) / (2 Q),  dR = (F, G, G, -F) / (2 R)
+        hq, hr = 0.5 * (f1 + f2) * iQ, 0.5 * (f1 - f2) * iR
+        return y, (hq * E + hr * F, hr * G - hq * H, hq * H + hr * G, hq * E - hr * F), (s1, s2, ok)
+
 
 @dataclass(frozen=True)
 class _JacobianForm:
@@ -214,6 +259,140 @@ class _JacobianForm:
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
         J_safe = jnp.where(det > 0, J, jnp.eye(2))
         return _barrier(det, self.fn(J_safe, *params))
+
+    def value_and_dJ(self, a, b, c, d, params=()):
+        """Values and ``dE/dJ`` of ``m`` Jacobians ``[[a, b], [c, d]]`` (each ``(m,)``), as
+        :meth:`_SingularValueForm.value_and_dJ` (``fn``'s own gradient by JAX, the barrier's
+        mask by hand); the third item is ``(J_safe (m, 2, 2), ok)``."""
+        J = jnp.stack([jnp.stack([a, b], -1), jnp.stack([c, d], -1)], -2)
+        fn = jax.vmap(jax.value_and_grad(self.fn), in_axes=(0,) + (None,) * len(params))
+        ok = None
+        if self.barrier:
+            ok = a * d - b * c > 0
+            J = jnp.where(ok[:, None, None], J, jnp.eye(2))
+        y, g = fn(J, *params)
+        if self.barrier:
+            y, g = jnp.where(ok, y, jnp.inf), jnp.where(ok[:, None, None], g, 0.0)
+        return y, (g[:, 0, 0], g[:, 0, 1], g[:, 1, 0], g[:, 1, 1]), (J, ok)
+
+
+def _root(x):
+    """``(sqrt(x), 1 / sqrt(x))``, both 0 at or below the safe square root's floor (the value
+    and the derivative :func:`jaxparam.geometry.safe_sqrt` has there)."""
+    pos = x > tol.SAFE_SQRT_FLOOR
+    r = jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+    return r, jnp.where(pos, 1.0 / jnp.where(pos, r, 1.0), 0.0)
+
+
+def _params_jvp(form, aux, params, dparams):
+    """``(m,)`` derivative of ``m`` densities along the parameters' tangent ``dparams``, at
+    the arguments :meth:`_SingularValueForm.value_and_dJ` evaluated them at (``aux``)."""
+    x, ok = (aux[:2], aux[2]) if isinstance(form, _SingularValueForm) else (aux[:1], aux[1])
+    fn = jax.vmap(form.fn, in_axes=(0,) * len(x) + (None,) * len(params))
+    _, t = jax.jvp(lambda *p: fn(*x, *p), tuple(params), tuple(dparams))
+    return t if ok is None else jnp.where(ok, t, 0.0)
+
+
+def _face_terms(form, V, F, Q, params):
+    """Per face, by hand: the area ``a``, the density ``f`` and their gradients in the
+    corners, for :func:`_mesh_energy`.
+
+    **Arguments:** ``form`` a :class:`_SingularValueForm` or :class:`_JacobianForm`,
+    ``V (n, 3)``, ``F (m, 3)``, ``Q (m, 3, 2)`` the corners' UVs, ``params`` a tuple of 0 or
+    1 parameter pytrees.  **Returns:** ``(a, f, e1, e2, gQ, aux)``: ``a, f (m,)``;
+    ``e1, e2`` the edges ``p1 - p0, p2 - p0 (m, 3)``; ``gQ (m, 3, 2)`` = ``df / dQ``; and
+    ``aux = (c11, c12, c22, h, (g11, g12, g22), form_aux)``: ``df/de1 = c11 e1 + c12 e2``,
+    ``df/de2 = c12 e1 + c22 e2`` and ``da/de1 = h (g22 e1 - g12 e2)``, ``da/de2 = h (g11 e2 -
+    g12 e1)`` with ``g = [e1 e2]^T [e1 e2]`` (a and f depend on the 3D triangle through its
+    Gram matrix alone), ``form_aux`` the form's (:func:`_params_jvp`).
+
+    The chain: the local frame ``(0, 0), (l1, 0), (x2, y2)`` of
+    :func:`jaxparam.geometry.local_frames` (``l1 = |e1|``, ``x2 = g12 / l1``,
+    ``y2 = |e1 x e2| / l1``), ``J = [q1 - q0, q2 - q0] Pinv`` with
+    ``Pinv = [[y2, -x2], [0, l1]] / (l1 y2)`` (survey eq. (9)), the form's ``dE/dJ``; then
+    ``dE/d[q1 - q0, q2 - q0] = M = dE/dJ Pinv^T`` and ``dE/dP = -J^T M`` for the frame's
+    ``(l1, x2, y2)``, and the frame's derivatives in ``(e1, e2)``.
+    """
+    P = V[F]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    g11, g12, g22 = jnp.sum(e1 * e1, -1), jnp.sum(e1 * e2, -1), jnp.sum(e2 * e2, -1)
+    l1, il1 = _root(g11)
+    nn, inn = _root(jnp.sum(jnp.cross(e1, e2) ** 2, -1))
+    x2, y2 = g12 * il1, nn * il1
+    u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
+    idet = 1.0 / (l1 * y2)
+    J00, J10 = u1[:, 0] * y2 * idet, u1[:, 1] * y2 * idet
+    J01, J11 = (u2[:, 0] * l1 - u1[:, 0] * x2) * idet, (u2[:, 1] * l1 - u1[:, 1] * x2) * idet
+    f, (Ga, Gb, Gc, Gd), form_aux = form.value_and_dJ(J00, J01, J10, J11, params)
+    M00, M01 = (Ga * y2 - Gb * x2) * idet, Gb * l1 * idet
+    M10, M11 = (Gc * y2 - Gd * x2) * idet, Gd * l1 * idet
+    g_l1 = -(J00 * M00 + J10 * M10)
+    g_x2 = -(J00 * M01 + J10 * M11)
+    g_y2 = -(J01 * M01 + J11 * M11)
+    k, il3 = inn * il1, il1 ** 3
+    c11 = g_l1 * il1 - g_x2 * g12 * il3 + g_y2 * (g22 * k - nn * il3)
+    c12 = g_x2 * il1 - g_y2 * g12 * k
+    c22 = g_y2 * g11 * k
+    gq1, gq2 = jnp.stack([M00, M10], -1), jnp.stack([M01, M11], -1)
+    gQ = jnp.stack([-(gq1 + gq2), gq1, gq2], 1)
+    return 0.5 * nn, f, e1, e2, gQ, (c11, c12, c22, 0.5 * inn, (g11, g12, g22), form_aux)
+
+
+def _is_zero(t) -> bool:
+    """Whether a ``symbolic_zeros`` tangent (pytree) is zero in every leaf."""
+    zero = jax.custom_derivatives.SymbolicZero
+    return all(isinstance(leaf, zero) for leaf in jax.tree_util.tree_leaves(
+        t, is_leaf=lambda x: isinstance(x, zero)))
+
+
+def _mesh_energy(en: Energy, V, F, Q):
+    """``E = sum_T |T| f_T / sum_T |T|`` (eq. (10)) of an energy of the Jacobian, with its
+    derivative written by hand: a ``jax.custom_jvp`` whose values are :func:`total`'s (the
+    same operations, so the same numbers) and whose tangent is the closed-form
+    ``dE/dV : dV + dE/dQ : dQ + dE/dparams . dparams`` (:func:`_face_terms`).  Reverse mode
+    comes by transposition of that linear map, so ``jax.grad``, ``jax.jvp``, ``jacfwd`` and
+    Hessians all work; the gradient then costs one pass of per-face arithmetic and one
+    scatter into the vertices instead of JAX's backward through the frames, the singular
+    values and the barrier (benchmarks/README.md, ``gradients.py``).
+
+    ``V (n, 3)``, ``F (m, 3)`` int, ``Q (m, 3, 2)`` the corners' UVs."""
+    form = en.of_J
+
+    def primal(V, Q, p):
+        return total(en, geo.local_frames(V, F), geo.face_areas(V, F), Q, p)
+
+    def tangent(primals, tangents):
+        V, Q, p = primals
+        dV, dQ, dp = tangents
+        params = (p,) if en.parametric else ()
+        a, f, e1, e2, gQ, (c11, c12, c22, h, (g11, g12, g22), form_aux) = _face_terms(
+            form, V, F, Q, params)
+        A = jnp.sum(a)
+        E = jnp.sum(a * f) / A
+        t = jnp.zeros((), E.dtype)
+        wa, wf = a / A, (f - E) * h / A            # per face: of df/dP and of da/dP
+        if not _is_zero(dV):
+            w11 = wa * c11 + wf * g22
+            w12 = wa * c12 - wf * g12
+            w22 = wa * c22 + wf * g11
+            W1 = w11[:, None] * e1 + w12[:, None] * e2
+            W2 = w12[:, None] * e1 + w22[:, None] * e2
+            t = t + jnp.sum(jnp.stack([-(W1 + W2), W1, W2], 1) * dV[F])
+        if not _is_zero(dQ):
+            t = t + jnp.sum(wa[:, None, None] * gQ * dQ)
+        if params and not _is_zero(dp):
+            SymbolicZero = jax.custom_derivatives.SymbolicZero
+            dps = jax.tree_util.tree_map(
+                lambda x, d: (jnp.zeros(jnp.shape(x), jax.dtypes.float0)
+                              if not jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+                              else jnp.zeros_like(x)) if isinstance(d, SymbolicZero) else d,
+                p, dp, is_leaf=lambda x: isinstance(x, SymbolicZero))
+            t = t + jnp.sum(wa * _params_jvp(form, form_aux, params, (dps,)))
+        return E, t
+
+    fn = jax.custom_jvp(primal)
+    fn.defjvp(tangent, symbolic_zeros=True)
+    return fn(V, Q, en.params)
 
 
 def _from_sv(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
