@@ -156,7 +156,8 @@ def main() -> int:
     print(hdr)
     for r in args.refine:
         for m in args.methods:
-            proc = subprocess.run([sys.executable, __file__, "--one", m, str(r)], capture_output=True,
+            proc = subprocess.run([sys.executable, __file__, "--one", m, str(r), "--data", str(args.data)],
+                                  capture_output=True,
                                   text=True, timeout=1800)
             if proc.returncode != 0:
                 print(f"{'?':>8s} {m:18s} failed: {proc.stderr.strip().splitlines()[-1:]}")
