@@ -27,6 +27,11 @@ __all__ = ["BLOCK", "nearest_neighbours", "knn_graph", "PointGraph", "point_grap
 #: stay in cache instead of streaming (N, k, 3) arrays through memory (1M points: 4 s -> ~1 s).
 BLOCK = 1 << 15
 
+#: Rows per block in the dense ``(block, k, 3)`` computations (robust frames, angular gaps, steep
+#: pairs): smaller still, about 2 MB temporaries (100k points: 25 % faster than :data:`BLOCK`).
+#: Every row is computed on its own, so the block size does not change any result.
+DENSE_BLOCK = 1 << 12
+
 
 def nearest_neighbours(P: np.ndarray, k: int):
     """``(dist (N, k), idx (N, k))``: each point's ``k`` nearest other points, nearest first."""
@@ -285,19 +290,23 @@ def robust_frames(P: np.ndarray, near: np.ndarray, *, rounds: int = 1,
     N = C.shape[0]
     normal, e1 = np.empty((N, 3)), np.empty((N, 3))
     height, noise, radius = np.empty(N), np.empty(N), np.empty(N)
-    for r0 in range(0, N, BLOCK):                  # blocks of rows: temporaries stay in cache
-        r1 = min(r0 + BLOCK, N)
-        D = P[near[r0:r1]] - C[r0:r1, None, :]                     # (block, k, 3)
+    for r0 in range(0, N, DENSE_BLOCK):            # blocks of rows: temporaries stay in cache
+        r1 = min(r0 + DENSE_BLOCK, N)
+        # np.take: 2x faster than P[...] with a column slice of ``near`` as the index.
+        D = np.take(P, near[r0:r1], axis=0) - C[r0:r1, None, :]    # (block, k, 3)
         r2 = np.einsum("bkd,bkd->bk", D, D)
         w0 = np.exp(-r2 / (r2.mean(1, keepdims=True) + 1e-300))
         w = w0
+        Dt = D.transpose(0, 2, 1)
         for it in range(rounds + 1):
             W = w / w.sum(1, keepdims=True)
             c = np.einsum("bk,bkd->bd", W, D)
-            X = D - c[:, None, :]
-            Xw = X * np.sqrt(W)[:, :, None]
-            n = smallest_eigenvector(np.matmul(Xw.transpose(0, 2, 1), Xw))
-            res = np.abs(np.matmul(X, n[:, :, None])[..., 0])
+            # The weighted covariance about c, sum_k W_k D_k D_k^T - c c^T (the weights sum to
+            # one), and the residuals D_k . n - c . n: no centred (block, k, 3) copies.
+            M = np.matmul(Dt * W[:, None, :], D) - c[:, :, None] * c[:, None, :]
+            n = smallest_eigenvector(M)
+            z = np.matmul(D, n[:, :, None])[..., 0]
+            res = np.abs(z - np.einsum("bd,bd->b", c, n)[:, None])
             if it < rounds:       # the middle two of 24 (or the median): a partition, not a sort
                 k = res.shape[1]
                 mid = np.partition(res, [(k - 1) // 2, k // 2], axis=1)[:, [(k - 1) // 2, k // 2]]
@@ -313,7 +322,6 @@ def robust_frames(P: np.ndarray, near: np.ndarray, *, rounds: int = 1,
         e1[r0:r1] = t / np.linalg.norm(t, axis=1, keepdims=True)
         height[r0:r1] = np.abs(np.einsum("bd,bd->b", c, n))
         noise[r0:r1] = s
-        z = np.matmul(D, n[:, :, None])[..., 0]
         radius[r0:r1] = np.sqrt(np.maximum((r2 - z * z).mean(1), 0.0))
     return Frames(normal, e1, np.cross(normal, e1), height, noise, radius)
 
@@ -362,17 +370,16 @@ def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.nd
     N = P.shape[0]
     deg = np.diff(indptr)
     keep = np.empty(indices.size, bool)
-    for r0 in range(0, N, BLOCK):                  # blocks of rows: temporaries stay in cache
-        r1 = min(r0 + BLOCK, N)
+    for r0 in range(0, N, DENSE_BLOCK):            # blocks of rows: temporaries stay in cache
+        r1 = min(r0 + DENSE_BLOCK, N)
         lo, hi = indptr[r0], indptr[r1]
         idx = indices[lo:hi]
         d = P[idx] - np.repeat(P[r0:r1], deg[r0:r1], axis=0)
-        tilt = np.maximum(np.abs(np.einsum("ij,ij->i", d, np.repeat(normal[r0:r1], deg[r0:r1], axis=0))),
-                          np.abs(np.einsum("ij,ij->i", d, normal[idx])))
+        nv, nw = np.repeat(normal[r0:r1], deg[r0:r1], axis=0), normal[idx]
+        tilt = np.maximum(np.abs(np.einsum("ij,ij->i", d, nv)), np.abs(np.einsum("ij,ij->i", d, nw)))
         keep[lo:hi] = tilt <= max_slope * np.sqrt(np.einsum("ij,ij->i", d, d))
         if min_dot > -1:
-            keep[lo:hi] &= np.einsum("ij,ij->i", np.repeat(normal[r0:r1], deg[r0:r1], axis=0),
-                                     normal[idx]) >= min_dot
+            keep[lo:hi] &= np.einsum("ij,ij->i", nv, nw) >= min_dot
     rows = np.repeat(np.arange(N), deg)
     weak = np.add.reduceat(keep.astype(np.int64), indptr[:-1]) < 3
     if exempt is not None:
@@ -427,9 +434,9 @@ def angular_gaps(P: np.ndarray, dist: np.ndarray, idx: np.ndarray, frame=None):
     **Returns:** ``(gap (N,), spacing (N,))``, the largest gap and the mean distance."""
     N = P.shape[0]
     gap = np.empty(N)
-    for s in range(0, N, BLOCK):
-        b = slice(s, min(s + BLOCK, N))
-        D = P[idx[b]] - P[b, None, :]                       # (block, k, 3)
+    for s in range(0, N, DENSE_BLOCK):
+        b = slice(s, min(s + DENSE_BLOCK, N))
+        D = np.take(P, idx[b], axis=0) - P[b, None, :]      # (block, k, 3)
         if frame is None:
             _, vecs = np.linalg.eigh(np.matmul(D.transpose(0, 2, 1), D))
             e1, e2 = vecs[:, :, 2], np.cross(vecs[:, :, 0], vecs[:, :, 2])

@@ -35,18 +35,33 @@ def orient_normals(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray, norma
     N = P.shape[0]
     rows = np.repeat(np.arange(N), np.diff(indptr))
     cols = np.asarray(indices)
-    # Each pair once, as (smaller, larger) (the weight is symmetric; a directed pair counts as
-    # undirected); a pair listed both ways is averaged below.
     up = rows < cols
-    rows, cols = np.where(up, rows, cols), np.where(up, cols, rows)
+    G = sp.csr_matrix((np.ones(cols.size, np.int8), cols, indptr), shape=(N, N))
+    symmetric = bool(G.has_sorted_indices) and _same_pattern(G, G.T.tocsr())
+    if symmetric:
+        # Every pair is listed both ways (a symmetrized kNN graph, column indices sorted in
+        # each row): its (smaller, larger) entries, in CSR order, are the upper triangle below
+        # exactly, each weight computed once (half the gathers, no COO sort).
+        rows, cols = rows[up], cols[up]
+    else:
+        # Each pair once, as (smaller, larger) (the weight is symmetric; a directed pair counts
+        # as undirected); a pair listed both ways is averaged below.
+        rows, cols = np.where(up, rows, cols), np.where(up, cols, rows)
     d = P[cols] - P[rows]
+    n_r, n_c = normal[rows], normal[cols]
     ln = np.sqrt(np.einsum("ij,ij->i", d, d)) + 1e-300
-    slope = np.maximum(np.abs(np.einsum("ij,ij->i", d, normal[rows])),
-                       np.abs(np.einsum("ij,ij->i", d, normal[cols]))) / ln
-    dot = np.einsum("ij,ij->i", normal[rows], normal[cols])
+    slope = np.maximum(np.abs(np.einsum("ij,ij->i", d, n_r)), np.abs(np.einsum("ij,ij->i", d, n_c))) / ln
+    dot = np.einsum("ij,ij->i", n_r, n_c)
+    del n_r, n_c
     # Strictly positive: a zero weight would be read as no edge.
-    W = sp.csr_matrix((1.0 - np.abs(dot) + slope + 1e-9, (rows, cols)), shape=(N, N))
-    W.data /= sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(N, N)).data
+    w = 1.0 - np.abs(dot) + slope + 1e-9
+    if symmetric:
+        ptr = np.zeros(N + 1, np.int64)
+        np.cumsum(np.bincount(rows, minlength=N), out=ptr[1:])
+        W = sp.csr_matrix((w, cols, ptr), shape=(N, N))
+    else:
+        W = sp.csr_matrix((w, (rows, cols)), shape=(N, N))
+        W.data /= sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(N, N)).data
     T = minimum_spanning_tree(W)
     T = (T + T.T).tocsr()
     nc, lab = connected_components(T, directed=False)
@@ -69,3 +84,10 @@ def orient_normals(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray, norma
     # Each component turned towards ``towards`` on the whole.
     s = np.bincount(lab, weights=n @ np.asarray(towards, np.float64), minlength=nc)
     return n * np.where(s[lab] < 0, -1.0, 1.0)[:, None]
+
+
+def _same_pattern(A: sp.csr_matrix, B: sp.csr_matrix) -> bool:
+    """Whether CSR ``A`` (sorted column indices; not modified: it may share the caller's
+    arrays) and ``B`` (sorted here) have the same nonzero pattern."""
+    B.sort_indices()
+    return bool(np.array_equal(A.indptr, B.indptr) and np.array_equal(A.indices, B.indices))

@@ -39,7 +39,7 @@ def find_outliers(P: np.ndarray, frames: Frames, dist: np.ndarray, near: np.ndar
     here from a planted outlier lying in the tangent plane beyond the boundary."""
     d4 = dist[:, :4].mean(1)
     high = (frames.height > scale * frames.noise) & (frames.height > height * frames.radius)
-    iso = np.flatnonzero((d4 > isolation * np.median(d4[near], axis=1)) & ~high)
+    iso = np.flatnonzero((d4 > isolation * np.median(np.take(d4, near), axis=1)) & ~high)
     if iso.size:
         D = P[near[iso]] - P[iso, None, :]
         ang = np.sort(np.arctan2(np.einsum("ckd,cd->ck", D, frames.e2[iso]),
@@ -61,9 +61,11 @@ def drop_points(P: np.ndarray, dist: np.ndarray, near: np.ndarray, drop: np.ndar
     new[keep] = np.arange(keep.size)
     nk, dk = near[keep], dist[keep]
     good = ~drop[nk]
-    order = np.argsort(~good, axis=1, kind="stable")           # kept neighbours first, in order
-    nk = np.take_along_axis(nk, order, 1)[:, :k]
-    dk = np.take_along_axis(dk, order, 1)[:, :k]
+    hit = np.flatnonzero(~good.all(1))         # the few rows that lost a neighbour
+    order = np.argsort(~good[hit], axis=1, kind="stable")      # kept neighbours first, in order
+    nk[hit] = np.take_along_axis(nk[hit], order, 1)
+    dk[hit] = np.take_along_axis(dk[hit], order, 1)
+    nk, dk = nk[:, :k], dk[:, :k]
     Q = P[keep]
     short = np.flatnonzero(good.sum(1) < k)
     if short.size:

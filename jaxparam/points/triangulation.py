@@ -190,7 +190,12 @@ def long_faces(F: np.ndarray, P: np.ndarray, spacing: np.ndarray, factor: float,
     not the mean, so that a vertex off the surface, whose own spacing is large, does not
     excuse its faces)."""
     L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
-    return L.max(1) > factor * reduce(spacing[F], axis=1)
+    if reduce is np.median:        # the middle of three, exactly (np.median's sort: 10x slower)
+        a, b, c = spacing[F[:, 0]], spacing[F[:, 1]], spacing[F[:, 2]]
+        local = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+    else:
+        local = reduce(spacing[F], axis=1)
+    return L.max(1) > factor * local
 
 
 def lone_points(F: np.ndarray, long: np.ndarray, n: int, keep: np.ndarray) -> np.ndarray:
