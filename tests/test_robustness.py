@@ -8,6 +8,7 @@ import pytest
 
 import jaxparam as jp
 from jaxparam.errors import DegenerateFaceError, MeshFileError
+from jaxparam.io import obj as obj_io
 
 
 def sliver_mesh(eps: float, *, validate: bool = True) -> jp.TriMesh:
@@ -89,7 +90,7 @@ def test_interrupted_write_leaves_no_file(tmp_path, grid_mesh, monkeypatch):
     def boom(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(np, "savetxt", boom)
+    monkeypatch.setattr(obj_io, "write_rows", boom)     # the OBJ writer's row writer
     with pytest.raises(KeyboardInterrupt):
         jp.save(target, grid_mesh, np.zeros((grid_mesh.n_vertices, 2)))
     assert list(tmp_path.iterdir()) == []
@@ -98,7 +99,7 @@ def test_interrupted_write_leaves_no_file(tmp_path, grid_mesh, monkeypatch):
 def test_failure_midway_keeps_the_old_file_and_leaves_no_temporary(tmp_path, grid_mesh, monkeypatch):
     target = tmp_path / "out.obj"
     target.write_text("old content")
-    real, calls = np.savetxt, []
+    real, calls = obj_io.write_rows, []
 
     def disk_full_on_second_block(f, *a, **k):      # the vertices are written, then the disk fills
         calls.append(1)
@@ -106,7 +107,7 @@ def test_failure_midway_keeps_the_old_file_and_leaves_no_temporary(tmp_path, gri
             raise OSError(28, "No space left on device")
         return real(f, *a, **k)
 
-    monkeypatch.setattr(np, "savetxt", disk_full_on_second_block)
+    monkeypatch.setattr(obj_io, "write_rows", disk_full_on_second_block)
     with pytest.raises(MeshFileError, match=r"out.obj: writing the file failed \(No space left"):
         jp.save(target, grid_mesh, np.zeros((grid_mesh.n_vertices, 2)))
     assert len(calls) == 2
