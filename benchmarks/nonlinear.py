@@ -14,6 +14,12 @@ Usage::
 
     python benchmarks/nonlinear.py                  # camelhead
     python benchmarks/nonlinear.py --refine 0 1 2   # and refined (363k faces at 2)
+    python benchmarks/nonlinear.py --compiles       # XLA compiles of minimize, shared meshes
+
+``--compiles`` counts XLA backend compilations (JAX's monitoring events) of a 2-iteration
+free-boundary ``newton`` run on every open mesh of ``../shared/data/meshes`` in one process
+(the persistent cache is turned off, so cache hits do not hide compiles; ``JAXPARAM_BUCKETS=0``
+shows the figures without shape buckets).
 """
 from __future__ import annotations
 
@@ -68,7 +74,46 @@ def first_time_within(times, values, target, rel=0.01):
     return float("nan")
 
 
+def compile_counts() -> int:
+    """The ``--compiles`` table: compiles and compile seconds of each mesh's minimize."""
+    import jax
+    import jax.monitoring
+
+    ev = {"n": 0, "s": 0.0}
+
+    def listen(name, secs, **_):
+        if name == "/jax/core/compile/backend_compile_duration":
+            ev["n"] += 1
+            ev["s"] += secs
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    print(f"buckets {jp.config.buckets}, load {os.getloadavg()[0]:.1f}")
+    print(f"{'mesh':14s} {'faces':>7s} {'compiles':>8s} {'compile s':>9s} {'wall s':>7s}")
+    total = [0, 0.0]
+    for path in sorted(DATA.parent.iterdir()):
+        try:
+            mesh = jp.load(path)
+            uv0 = np.asarray(jp.convex_map(mesh))
+        except jp.errors.JaxparamError:      # closed or non-manifold: not a disk
+            continue
+        n0, s0, t0 = ev["n"], ev["s"], time.perf_counter()
+        jp.minimize(mesh, "symmetric_dirichlet", init=uv0, free_boundary=True, max_iters=2,
+                    verbose=False)
+        n, s = ev["n"] - n0, ev["s"] - s0
+        total[0] += n
+        total[1] += s
+        print(f"{path.stem:14s} {mesh.n_faces:7d} {n:8d} {s:9.2f} {time.perf_counter() - t0:7.2f}",
+              flush=True)
+    print(f"{'total':14s} {'':7s} {total[0]:8d} {total[1]:9.2f}  (load {os.getloadavg()[0]:.1f})")
+    return 0
+
+
 def main() -> int:
+    import sys
+
+    if "--compiles" in sys.argv:
+        jp.config.compile_cache = None
+        return compile_counts()
     import igl
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])

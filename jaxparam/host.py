@@ -17,7 +17,7 @@ import numpy as np
 from . import tol
 
 __all__ = ["safe_norm", "corner_geometry",  "weights_from_angles", "shape_preserving_weights",
-           "face_quantities", "circle"]
+           "face_quantities", "circle", "signed_areas", "face_areas"]
 
 
 def safe_norm(x, axis=-1):
@@ -95,6 +95,24 @@ def shape_preserving_weights(delta, r, row, row_start, row_end, degree, *, n_row
     tau = np.concatenate([ak, al, am])
     lam = np.bincount(idx, tau, minlength=p.shape[0])
     return lam / degree[row]
+
+
+def signed_areas(uv, F) -> np.ndarray:
+    """Twin of :func:`jaxparam.geometry.signed_areas`: ``(m,)`` signed areas of the faces
+    ``F (m, 3)`` of ``uv (n, 2)`` (positive: counter-clockwise)."""
+    Q = np.asarray(uv)[F]
+    d1, d2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
+    return 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+
+
+def face_areas(V, F) -> np.ndarray:
+    """Twin of :func:`jaxparam.geometry.face_areas`: ``(m,)`` unsigned areas of the faces
+    ``F (m, 3)`` of ``V (n, 3)`` (or ``(n, 2)``, lifted)."""
+    V = np.asarray(V)
+    if V.shape[-1] == 2:
+        return np.abs(signed_areas(V, F))
+    P = V[F]
+    return 0.5 * safe_norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]))
 
 
 def face_quantities(V, F, uv) -> dict:

@@ -14,6 +14,13 @@
     shorter than 0.2 s are not stored (JAX's own ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``
     changes that); delete the folder to empty it.
 
+``jp.config.buckets``
+    Shape buckets for the minimizers' kernels (on by default; ``JAXPARAM_BUCKETS=0`` turns them
+    off): the vertex, face and Hessian sizes are padded to a few bucket sizes, so that meshes of
+    similar size, and the atlas's split rounds, reuse compiled code
+    (:mod:`jaxparam.optimize.padding`).  Off, every new size compiles again; results agree
+    either way to rounding.
+
 ``import jaxparam`` does not import JAX (issue 17): :func:`configure_jax` (float64 and the
 compilation cache) runs the moment JAX loads, whoever imports it, through
 :func:`jaxparam.lazy_jax.when_jax_loads`.
@@ -49,10 +56,11 @@ class Settings:
     ``AttributeError`` naming the known ones, so a typo is not silently ignored.
     """
 
-    __slots__ = ("_progress", "_compile_cache")
+    __slots__ = ("_progress", "_compile_cache", "_buckets")
 
     def __init__(self) -> None:
         self._progress: bool | None = None
+        self._buckets: bool | None = None
         self._compile_cache: str | None = default_compile_cache()
 
     @property
@@ -65,6 +73,18 @@ class Settings:
     @progress.setter
     def progress(self, value: bool | None) -> None:
         self._progress = None if value is None else bool(value)
+
+    @property
+    def buckets(self) -> bool:
+        """Whether the minimizers pad their kernels' sizes to buckets (``JAXPARAM_BUCKETS``
+        sets the default, on)."""
+        if self._buckets is not None:
+            return self._buckets
+        return env_flag("JAXPARAM_BUCKETS", True)
+
+    @buckets.setter
+    def buckets(self, value: bool | None) -> None:
+        self._buckets = None if value is None else bool(value)
 
     @property
     def compile_cache(self) -> str | None:
@@ -101,7 +121,8 @@ class Settings:
         object.__setattr__(self, name, value)
 
     def __repr__(self) -> str:
-        return f"jp.config(progress={self.progress}, compile_cache={self.compile_cache!r})"
+        return (f"jp.config(progress={self.progress}, buckets={self.buckets}, "
+                f"compile_cache={self.compile_cache!r})")
 
 
 def default_compile_cache() -> str | None:

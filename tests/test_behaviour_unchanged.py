@@ -32,6 +32,31 @@ def test_maps_bitwise_unchanged():
 
 @pytest.mark.slow
 def test_minimize_unchanged():
+    """Fixed boundary: the recorded UVs to 1e-9.  Free boundary: the energy is invariant under
+    rigid motions of the plane, so its minimizer is defined only up to one, and the Newton step's
+    near-null rotation turns rounding differences (e.g. the shape buckets' padded sums, issue 17)
+    into a rotation of 1e-12 to 3e-9 rad; there the UVs are compared after the best rigid
+    alignment (Kabsch), to 1e-7 of the layout's extent, and the energies to 1e-10 relative."""
     want = np.load(BASE / "minimize.npz")
     for key, uv in record.minimized(jp):
-        np.testing.assert_allclose(uv, want[key], rtol=0, atol=1e-9, err_msg=key)
+        ref = want[key]
+        if key.endswith("/fixed"):
+            np.testing.assert_allclose(uv, ref, rtol=0, atol=1e-9, err_msg=key)
+            continue
+        name, energy, _ = key.split("/")
+        mesh = jp.load(record.DATA / name)
+        e_got, e_want = (float(jp.ENERGIES[energy](mesh, x)) for x in (uv, ref))
+        assert abs(e_got - e_want) <= 1e-10 * abs(e_want), (key, e_got, e_want)
+        extent = float(np.ptp(ref, axis=0).max())
+        np.testing.assert_allclose(rigidly_aligned(uv, ref), ref, rtol=0, atol=1e-7 * extent,
+                                   err_msg=key)
+
+
+def rigidly_aligned(uv, ref):
+    """``uv (n, 2)`` moved by the rotation and translation that bring it closest to ``ref``
+    in the least-squares sense (Kabsch; reflections excluded)."""
+    a, b = uv - uv.mean(0), ref - ref.mean(0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    d = np.sign(np.linalg.det(u @ vt))
+    R = u @ np.diag([1.0, d]) @ vt
+    return a @ R + ref.mean(0)

@@ -239,3 +239,81 @@ def test_the_host_normalization_equals_the_jax_one():
     x = np.asarray(P.x0) * 1.7 + 0.3 * np.sin(np.arange(P.x0.size))
     ref = np.asarray(pb.normalized(x, P.base, P.free, P.F))
     assert np.max(np.abs(P.normalize(x) - ref)) < 1e-13 * np.max(np.abs(ref))
+
+
+# --- shape buckets (issue 17, item 2) -----------------------------------------------------
+
+def test_buckets_cover_every_size_in_small_steps():
+    from jaxparam.optimize.padding import BUCKET_STEPS, MIN_BUCKET, bucket
+    sizes = np.arange(0, 200_000, 37)
+    b = np.array([bucket(int(s)) for s in sizes])
+    assert np.all(b >= sizes) and np.all(np.diff(b) >= 0) and b[0] == MIN_BUCKET
+    big = sizes > MIN_BUCKET
+    assert np.all(b[big] <= np.ceil(sizes[big] * 2 ** (1 / BUCKET_STEPS)) + 1)
+    assert np.unique(b).size < 0.01 * sizes.size            # few distinct shapes
+
+
+@pytest.mark.parametrize("free", [False, True])
+@pytest.mark.parametrize("energy", ["symmetric_dirichlet", "arap", "angle"])
+def test_padded_kernels_equal_unpadded(mesh, start, free, energy):
+    """The ghost faces and sink vertex contribute nothing: energy, gradient, flip count,
+    max step and Hessian equal the unpadded kernels to rounding."""
+    from jaxparam.optimize import newton as nt, problem as pb
+    en = jp.energies.get(energy)
+    prob = pb.Problem(mesh, en, free, start)
+    assert prob.padded.F.shape[0] > mesh.n_faces and prob.padded.K >= prob.free.size
+    rng = np.random.default_rng(0)
+    x = np.asarray(prob.x0) + 1e-3 * rng.standard_normal(prob.x0.shape)
+    d = rng.standard_normal(x.shape)
+    f0, g0 = pb.energy_value_and_grad(jnp.asarray(x), *prob.arrays, en=prob.en)
+    f, g = prob.value_and_grad(x)
+    assert f == pytest.approx(float(f0), rel=1e-13) and prob.value(x) == pytest.approx(f, rel=1e-13)
+    np.testing.assert_allclose(g, np.asarray(g0), rtol=0, atol=1e-13 * np.abs(g0).max())
+    assert prob.flipped(x) == int(pb.count_flipped(jnp.asarray(x), prob.base, prob.free, prob.F))
+    t0 = float(pb.max_step_along(jnp.asarray(x), jnp.asarray(d), prob.base, prob.free, prob.F))
+    assert prob.max_step(x, d) == pytest.approx(t0, rel=1e-13)
+    hp = prob.hessian_pattern
+    H0 = nt.face_hessians(jnp.asarray(x), *prob.arrays, prob.jacobian_maps, en=prob.en, project=True)
+    want = np.asarray(nt._assemble(H0, hp.pos, nnz=hp.pattern.nnz))
+    np.testing.assert_allclose(nt.sparse_hessian(prob, x), want, rtol=0,
+                               atol=1e-13 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("free", [False, True])
+def test_similar_meshes_share_compiled_kernels(free):
+    """Two meshes of different sizes in the same buckets minimize with the kernels the
+    first one compiled: no new entry in any jit cache."""
+    from jaxparam.optimize import newton as nt, problem as pb
+    a = jp.shapes.plane_grid(15, 15, jitter=0.2)
+    b = jp.shapes.plane_grid(15, 16, jitter=0.2)
+    assert (a.n_vertices, a.n_faces) != (b.n_vertices, b.n_faces)
+    kernels = [pb.energy_value, pb.energy_value_and_grad, pb.count_flipped, pb.max_step_along,
+               nt.face_hessians, nt._assemble]
+    ra = jp.minimize(a, "symmetric_dirichlet", free_boundary=free, max_iters=3, verbose=False)
+    sizes = [k._cache_size() for k in kernels]
+    rb = jp.minimize(b, "symmetric_dirichlet", free_boundary=free, max_iters=3, verbose=False)
+    assert ra.iterations >= 1 and rb.iterations >= 1 and rb.flips == 0
+    assert [k._cache_size() for k in kernels] == sizes
+
+
+def test_buckets_off_is_the_unpadded_computation(mesh, start):
+    """``jp.config.buckets = False``: no padding, and the energy, gradient and Hessian are
+    bitwise those of the unpadded kernels."""
+    from jaxparam.optimize import newton as nt, problem as pb
+    jp.config.buckets = False
+    try:
+        prob = pb.Problem(mesh, jp.energies.get("symmetric_dirichlet"), True, start)
+        assert prob.padded.F.shape[0] == mesh.n_faces and prob.padded.K == prob.free.size
+        x = np.asarray(prob.x0) * 1.01
+        f0, g0 = pb.energy_value_and_grad(jnp.asarray(x), *prob.arrays, en=prob.en)
+        f, g = prob.value_and_grad(x)
+        assert f == float(f0)
+        np.testing.assert_array_equal(g, np.asarray(g0))
+        hp = prob.hessian_pattern
+        H0 = nt.face_hessians(jnp.asarray(x), *prob.arrays, prob.jacobian_maps, en=prob.en,
+                              project=True)
+        np.testing.assert_array_equal(nt.sparse_hessian(prob, x),
+                                      np.asarray(nt._assemble(H0, hp.pos, nnz=hp.pattern.nnz)))
+    finally:
+        jp.config.buckets = None
+    assert jp.config.buckets

@@ -157,3 +157,19 @@ def test_host_circle_equals_boundary_circle(meshes, spacing):
     np.testing.assert_allclose(host.circle(P, spacing),
                                np.asarray(jp.boundary.circle(jnp.asarray(P), spacing=spacing)),
                                rtol=0, atol=1e-15)
+
+
+def test_host_areas_equal_geometry(meshes):
+    """The minimizer's start checks use NumPy areas: equal to the JAX ones to rounding."""
+    from jaxparam import geometry as geo
+    for m in meshes.values():
+        uv = np.asarray(jp.convex_map(m))
+        np.testing.assert_allclose(host.signed_areas(uv, m.faces),
+                                   np.asarray(geo.signed_areas(jnp.asarray(uv), m.faces)),
+                                   rtol=1e-13, atol=1e-17)
+        for V in (np.asarray(m.vertices), uv):
+            np.testing.assert_allclose(host.face_areas(V, m.faces),
+                                       np.asarray(geo.face_areas(jnp.asarray(V), m.faces)),
+                                       rtol=1e-13, atol=1e-17)
+    flipped = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 0.0]])
+    assert host.signed_areas(flipped, np.array([[0, 1, 2]]))[0] == -0.5

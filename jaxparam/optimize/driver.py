@@ -13,6 +13,7 @@ from .. import energies as en_mod
 from .. import geometry as geo
 from .. import metrics
 from .. import tol
+from ..host import face_areas as host_face_areas, signed_areas as host_signed_areas
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from .base import Solver, StopRules
@@ -54,7 +55,7 @@ class MinimizeResult:
 def check_start(mesh, uv0, where: str = "minimize") -> None:
     """Raise :class:`SolverError` (stage ``"init"``) unless every face of ``uv0 (n, 2)`` has
     a positive signed area."""
-    A = np.asarray(geo.signed_areas(jnp.asarray(np.nan_to_num(np.asarray(uv0, np.float64))), mesh.faces))
+    A = host_signed_areas(np.nan_to_num(np.asarray(uv0, np.float64)), mesh.faces)
     bad = np.flatnonzero(A <= 0)
     if bad.size:
         raise SolverError(
@@ -155,9 +156,8 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
         raise MeshError(f"minimize: init must have shape ({mesh.n_vertices}, 2), got {uv0.shape}.")
     check_start(mesh, uv0)
     if free_boundary and not en.scale_invariant:
-        V = np.asarray(mesh.vertices)
-        a3 = float(np.sum(np.asarray(geo.face_areas(V, mesh.faces))))
-        auv = float(np.sum(np.asarray(geo.signed_areas(jnp.asarray(np.nan_to_num(uv0)), mesh.faces))))
+        a3 = float(np.sum(host_face_areas(np.asarray(mesh.vertices, np.float64), mesh.faces)))
+        auv = float(np.sum(host_signed_areas(np.nan_to_num(uv0), mesh.faces)))
         c = np.nanmean(uv0, axis=0)
         uv0 = (uv0 - c) * np.sqrt(a3 / auv)
     prob = Problem(mesh, en, free_boundary, uv0)

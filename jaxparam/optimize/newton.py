@@ -15,6 +15,7 @@ from .. import geometry as geo
 from .. import sparse
 from .. import tol
 from .base import HostLoopSolver, Step
+from .padding import bucket
 from .problem import Problem, uv_of
 from .search import flip_free_armijo
 
@@ -110,11 +111,14 @@ def _assemble(H, pos, *, nnz):
 
 def sparse_hessian(problem: Problem, x, *, project: bool = True) -> np.ndarray:
     """The ``(nnz,)`` values of the energy's Hessian at ``x`` on ``problem.hessian_pattern``
-    (a writable host array), each face's block PSD-projected when ``project``."""
-    hp = problem.hessian_pattern
-    H = face_hessians(jnp.asarray(x), *problem.arrays, problem.jacobian_maps, en=problem.en,
-                      project=project)
-    return np.array(_assemble(H, hp.pos, nnz=hp.pattern.nnz))
+    (a writable host array), each face's block PSD-projected when ``project``.  Evaluated
+    on the problem's padded arrays (:attr:`Problem.padded`): the face Hessians at the
+    bucketed face count, assembled into a bucketed ``nnz``, the real slots returned."""
+    hp, p = problem.hessian_pattern, problem.padded
+    H = face_hessians(p.x(x), *problem.padded_arrays, p.D, en=problem.en, project=project)
+    nnz = hp.pattern.nnz
+    vals = _assemble(H, problem.padded_positions, nnz=bucket(nnz))
+    return np.array(np.asarray(vals)[:nnz])
 
 
 @dataclass(frozen=True)

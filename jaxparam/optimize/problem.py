@@ -21,6 +21,7 @@ from .. import energies as en_mod
 from .. import geometry as geo
 from .. import sparse
 from ..errors import SolverError
+from .padding import Padded, pad_positions, padded_arrays
 
 __all__ = ["Problem", "HessianPattern", "uv_of", "energy_at", "energy_value",
            "energy_value_and_grad", "count_flipped", "max_step_along", "jacobian_maps",
@@ -151,7 +152,10 @@ class Problem:
     ``frames (m, 3, 2)`` and ``areas (m,)`` of the 3D triangles, ``free (k,)`` the free
     vertices (referenced ones; all of them with ``free_boundary``, else the interior),
     ``base (n, 2)`` the start UVs (NaN rows zeroed), ``x0 (2 k,)`` the start's free DOFs,
-    ``free_boundary``.  The methods take and return host (NumPy) values.
+    ``free_boundary``.  The methods take and return host (NumPy) values; they, and
+    Newton's Hessian, evaluate the kernels on :attr:`padded` (the arrays at bucket sizes,
+    :mod:`jaxparam.optimize.padding`), so problems of similar size share compiled code;
+    ``frames`` and ``areas`` (unpadded) are computed on first use.
 
     ``areas (m,)``, when given, replaces the 3D areas as each face's weight in the energy's
     sum (e.g. :func:`jaxparam.remesh.area_aware_map`'s per-face density weights).
@@ -162,10 +166,7 @@ class Problem:
         self.mesh, self.en = mesh, en.static
         self.params = jax.tree_util.tree_map(jnp.asarray, en.params)
         self.F = mesh.faces
-        V = jnp.asarray(mesh.vertices, dtype=jnp.float64)
-        self.frames = geo.local_frames(V, self.F)
-        self.areas = (geo.face_areas(V, self.F) if areas is None
-                      else jnp.asarray(areas, dtype=jnp.float64))
+        self._areas = areas
         self.free = free_vertices(t, free_boundary)
         if self.free.size == 0:
             raise SolverError("minimize: no free vertex to optimize (every vertex is on the fixed "
@@ -175,32 +176,61 @@ class Problem:
         self.x0 = jnp.asarray(base[self.free].reshape(-1))
         self.free_boundary = free_boundary
 
+    @functools.cached_property
+    def frames(self):
+        """``(m, 3, 2)``: the 3D triangles in their own frames (computed on first use)."""
+        return geo.local_frames(jnp.asarray(self.mesh.vertices, dtype=jnp.float64), self.F)
+
+    @functools.cached_property
+    def areas(self):
+        """``(m,)``: each face's weight (the 3D areas unless ``areas`` was given)."""
+        if self._areas is not None:
+            return jnp.asarray(self._areas, dtype=jnp.float64)
+        return geo.face_areas(jnp.asarray(self.mesh.vertices, dtype=jnp.float64), self.F)
+
+    @functools.cached_property
+    def padded(self) -> Padded:
+        """The kernels' arrays at bucket sizes (:mod:`jaxparam.optimize.padding`): what the
+        host methods below and Newton's Hessian evaluate, so that problems of similar size
+        share compiled code."""
+        return padded_arrays(self.mesh.vertices, self.F, self.free, self._host_base, self._areas)
+
     @property
     def arrays(self) -> tuple:
         """``(base, free, F, frames, areas, params)``: what the energy kernels take after
-        ``x``."""
+        ``x`` (unpadded: the traced and optimistix paths)."""
         return self.base, self.free, self.F, self.frames, self.areas, self.params
+
+    @property
+    def padded_arrays(self) -> tuple:
+        """:attr:`arrays` at bucket sizes (after the padded ``x``, :meth:`Padded.x`)."""
+        p = self.padded
+        return p.base, p.free, p.F, p.frames, p.areas, self.params
 
     def uv(self, x):
         """The ``(n, 2)`` UVs (a JAX array) of the free DOFs ``x``."""
-        return uv_of(jnp.asarray(x), self.base, self.free)
+        if isinstance(x, jax.core.Tracer):
+            return uv_of(x, self.base, self.free)
+        return jnp.asarray(self._host_uv(np.asarray(x, np.float64).reshape(-1, 2)))
 
     def value(self, x) -> float:
         """The energy at ``x``."""
-        return float(energy_value(jnp.asarray(x), *self.arrays, en=self.en))
+        return float(energy_value(self.padded.x(x), *self.padded_arrays, en=self.en))
 
     def value_and_grad(self, x):
         """``(energy, gradient (2 k,))`` at ``x``."""
-        f, g = energy_value_and_grad(jnp.asarray(x), *self.arrays, en=self.en)
-        return float(f), np.asarray(g)
+        f, g = energy_value_and_grad(self.padded.x(x), *self.padded_arrays, en=self.en)
+        return float(f), np.asarray(g)[:2 * self.free.size]
 
     def flipped(self, x) -> int:
         """How many faces are inverted or degenerate at ``x``."""
-        return int(count_flipped(jnp.asarray(x), self.base, self.free, self.F))
+        p = self.padded
+        return int(count_flipped(p.x(x), p.base, p.free, p.F))
 
     def max_step(self, x, d) -> float:
         """The largest flip-free step from ``x`` along ``d`` (``inf`` when unbounded)."""
-        return float(max_step_along(jnp.asarray(x), jnp.asarray(d), self.base, self.free, self.F))
+        p = self.padded
+        return float(max_step_along(p.x(x), p.x(d), p.base, p.free, p.F))
 
     @functools.cached_property
     def jacobian_maps(self):
@@ -213,6 +243,12 @@ class Problem:
         topology and free set, so a second minimization reuses it, and PARDISO its symbolic
         analysis)."""
         return hessian_pattern(self.mesh.topology, np.asarray(self.free, np.int64).tobytes())
+
+    @functools.cached_property
+    def padded_positions(self):
+        """``(M * 36,)`` device array: :attr:`hessian_pattern`'s ``pos`` at the padded face
+        count (``-1``, nowhere, for the ghost faces)."""
+        return jnp.asarray(pad_positions(self.hessian_pattern.pos, int(self.padded.F.shape[0])))
 
     def normalize(self, x):
         """Free boundary, scale-invariant energy: recentre and rescale to the start's area
