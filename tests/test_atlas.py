@@ -192,6 +192,46 @@ def test_place_square_fills_holes_and_keeps_margins():
     assert total / side ** 2 >= 0.45
 
 
+def test_fill_square_is_bottom_left_and_keeps_margins():
+    # the U and blobs of the test above in a fixed 64-cell square: every mask inside it,
+    # none within the margin of another, none that could move one cell lower, and
+    # None when the masks' area exceeds the square
+    U = np.ones((40, 40), bool)
+    U[8:, 12:28] = False
+    rng = np.random.default_rng(3)
+    masks = [U]
+    for r in rng.uniform(2.5, 9.0, 14):
+        y, x = np.mgrid[: int(2 * r) + 1, : int(2 * r) + 1] - r
+        masks.append(x ** 2 + (1.6 * y) ** 2 <= r ** 2)
+    margin, size = 2, 64
+    pos, turn, side = pack.fill_square(masks, size, margin)
+    assert side == size
+    from scipy import ndimage
+    st = np.ones((2 * margin + 1, 2 * margin + 1), bool)
+
+    def grid(c, dj=0):
+        Mt = pack._turns(masks[c])[turn[c]][0]
+        i, j = pos[c]
+        G = np.zeros((size + 1, size), bool)
+        assert 0 <= i and i + Mt.shape[1] <= size and 0 <= j and j + Mt.shape[0] <= size, c
+        G[j + dj:j + dj + Mt.shape[0], i:i + Mt.shape[1]] = Mt
+        return G
+
+    placed = [grid(c) for c in range(len(masks))]
+    for a in range(len(masks)):
+        others = np.any([placed[b] for b in range(len(masks)) if b != a], axis=0)
+        assert not np.any(ndimage.binary_dilation(placed[a], st) & others), a
+    # bottom-left: one cell lower collides with a mask placed before (largest first) or leaves
+    order = list(np.argsort([-m.sum() for m in masks], kind="stable"))
+    for k, a in enumerate(order):
+        if pos[a][1] == 0:
+            continue
+        before = np.any([placed[b] for b in order[:k]], axis=0) if k else np.zeros_like(placed[a])
+        assert np.any(ndimage.binary_dilation(grid(a, -1), st) & before), a
+    assert sum(int(M.sum()) for M in masks) / size ** 2 >= 0.45
+    assert pack.fill_square(masks, 40, margin) is None
+
+
 # ---------------------------------------------------------------- atlases
 
 def test_sphere_atlas():
@@ -206,6 +246,35 @@ def test_sphere_atlas():
         for k in range(3):
             assert (tuple(e[f, k]) in cut) == (len({a.chart[g] for g in np.flatnonzero(
                 (e == e[f, k]).all(-1).any(-1))}) > 1)
+
+
+def test_post_merge_keeps_maps_valid_and_bounds_the_distortion_rise():
+    # the sphere's charts merged again after flattening: fewer charts, each a disk with a
+    # flip-free map within max_aspect, and the area-weighted symmetric Dirichlet rising by
+    # at most the budget's share of its excess over 2 (a budget of 0: no rise at all)
+    from jaxparam.atlas import build, merge as mg
+    mesh = jp.shapes.sphere(2)
+    a = atlas(mesh, post_merge_budget=0)
+    V, F, t = np.asarray(mesh.vertices), mesh.faces, mesh.topology
+    cuv = a.chart_uv[a.uv_faces]
+    from jaxparam import energies
+    en = energies.get("symmetric_dirichlet")
+    flat = lambda c, idx: build._flatten_subset(V, F, c, idx, en, "shape_preserving", "newton", 200)
+    adj = ch.face_adjacency(t)
+    _, _, area = mg.face_sym_dirichlet(V, F, cuv)
+    mean_sd = lambda u: float(np.sum(mg.face_sym_dirichlet(V, F, u)[0] * area) / area.sum())
+    e0 = mean_sd(cuv)
+    for budget in (0.0, 0.5):
+        chart, uv2, merges = mg.merge_flattened(V, F, adj, a.chart, cuv, flat, cone=100.0,
+                                                budget=budget, max_aspect=3.5, max_share=0.5)
+        assert chart.max() + 1 == a.n_charts - merges and np.array_equal(np.unique(chart), np.arange(chart.max() + 1))
+        assert ch.disk_flags(t, chart).all()
+        e1, e2 = uv2[:, 1] - uv2[:, 0], uv2[:, 2] - uv2[:, 0]
+        assert np.all(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0)
+        assert np.max(mg.face_sym_dirichlet(V, F, uv2)[1]) <= 3.5
+        assert mean_sd(uv2) <= e0 + budget * (e0 - 2.0) + 1e-12
+        if budget:
+            assert merges > 0
 
 
 def test_charts_are_disks_on_a_torus_without_flattening():
@@ -246,6 +315,9 @@ def test_atlas_refuses_bad_input():
         atlas(mesh, merge_cone=0.0)
     with pytest.raises(jp.MeshError, match="small_merge_cone"):
         atlas(mesh, small_merge_cone=180.0)
+    for kw in ({"post_merge_budget": -0.1}, {"post_merge_cone": 0.0}, {"post_merge_share": 1.5}):
+        with pytest.raises(jp.MeshError, match="post_merge"):
+            atlas(mesh, **kw)
     with pytest.raises(jp.MeshError, match="tracers"):
         jax.grad(lambda X: jnp.sum(atlas(jp.TriMesh(X, mesh.faces)).uv))(jnp.asarray(mesh.vertices))
     # a non-manifold mesh is refused by the library before any atlas work

@@ -12,6 +12,7 @@ from ..io import as_mesh
 from ..mesh import TriMesh
 from . import charts as ch
 from . import flatten as fl
+from . import merge as mg
 from .pack import pack_charts
 from .result import Atlas, atlas_stats
 
@@ -33,7 +34,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
           margin_texels: int = 2, cone: float = 88.0, max_aspect: float = 3.5,
           weights: str = "shape_preserving", solver="newton", max_iters: int = 200,
           max_splits: int = 16, merge_cone: float | None = None,
-          small_merge_cone: float | None = None) -> Atlas:
+          small_merge_cone: float | None = None, post_merge_budget: float = 0.0,
+          post_merge_cone: float = 100.0, post_merge_share: float = 0.05) -> Atlas:
     """A UV atlas of any manifold mesh: closed or open, any genus, several components.
 
     **Arguments:**
@@ -53,6 +55,17 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       stretch some triangles (decimated-knight: 72 charts, max ``s1/s2`` 3.37, E_sd 2.038,
       where 8.0 gave 60, 4.92 and 2.064; the other meshes of ``../shared/data`` stay
       under 2.4).
+    - ``post_merge_budget``: after flattening, neighbouring charts (the smaller under
+      ``post_merge_share`` of the area, the union within ``post_merge_cone`` degrees) are
+      merged and flattened again, and a union is kept when its map is flip-free, does not
+      cross itself, stays within ``max_aspect``, and the atlas's area-weighted symmetric
+      Dirichlet (isometry 2) rises by at most ``post_merge_budget`` times its excess over 2
+      in all (:mod:`~jaxparam.atlas.merge`; 0, the default: no merging).  At 0.04
+      (session 8, load 16-18): 3holes 34 -> 29 charts (xatlas 29), E_sd 2.0035 (2.0035);
+      rocker-arm 57 -> 39 (43), 2.0027 (2.0065); cow 110 -> 73 (107), 2.0060 (2.0401);
+      decimated-knight 72 -> 46 (75), 2.0394 (2.0417); max ``s1/s2`` unchanged; but
+      coverage falls 2.7-3.7 points (cow 64.1 %, xatlas 64.3 %) and rocker-arm's merge
+      rounds took 473 s, so it is not the default yet.
     - ``weights``, ``solver``, ``max_iters``: the convex-combination start's weights and
       the minimization's solver and iteration cap.
 
@@ -95,6 +108,10 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
     if small_merge_cone is not None and not 0 < small_merge_cone < 180:
         raise MeshError("atlas: small_merge_cone must be an angle in (0, 180) degrees or None, "
                         f"got {small_merge_cone}.")
+    if not (post_merge_budget >= 0 and 0 < post_merge_cone < 180 and 0 < post_merge_share <= 1):
+        raise MeshError("atlas: post_merge_budget must be >= 0, post_merge_cone in (0, 180) degrees "
+                        f"and post_merge_share in (0, 1]; got {post_merge_budget}, {post_merge_cone}, "
+                        f"{post_merge_share}.")
     en = en_mod.get(energy)
     t0 = time.perf_counter()
     seconds = {}
@@ -139,6 +156,14 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         touched = np.unique(chart[np.concatenate(redo)])
         todo = np.flatnonzero(np.isin(chart, touched))
     seconds["flatten"] = time.perf_counter() - t1
+    if post_merge_budget > 0:
+        t3 = time.perf_counter()
+        chart, corner_uv, _ = mg.merge_flattened(
+            V, F, ch.face_adjacency(t), chart, corner_uv,
+            lambda c, idx: _flatten_subset(V, F, c, idx, en, weights, solver, max_iters),
+            cone=float(post_merge_cone), budget=float(post_merge_budget),
+            max_aspect=float(max_aspect), max_share=float(post_merge_share))
+        seconds["merge"] = time.perf_counter() - t3
     # one UV vertex per (chart, vertex)
     n = t.n_vertices
     key = np.repeat(chart, 3) * np.int64(n) + F.reshape(-1)
