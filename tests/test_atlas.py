@@ -248,6 +248,7 @@ def test_sphere_atlas():
                 (e == e[f, k]).all(-1).any(-1))}) > 1)
 
 
+@pytest.mark.slow  # 20 s of CPU for an option that is off by default
 def test_post_merge_keeps_maps_valid_and_bounds_the_distortion_rise():
     # the sphere's charts merged again after flattening: fewer charts, each a disk with a
     # flip-free map within max_aspect, and the area-weighted symmetric Dirichlet rising by
