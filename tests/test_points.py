@@ -10,7 +10,9 @@ import jaxparam as jp
 from jaxparam import points as PT
 from jaxparam import weights as wts
 from jaxparam.points.graph import drop_steep_pairs, knn_graph, tangent_frames
+from jaxparam.points.meshless import map_points
 from jaxparam.points.triangulation import delaunay, flip_towards_3d_delaunay, peel_ears
+from jaxparam.topology import half_edge_twins
 from jaxparam.triangles import orient
 from jaxparam.errors import MeshFileError, PointCloudError
 from conftest import data_path
@@ -205,6 +207,31 @@ def test_3d_flips_keep_a_one_to_one_triangulation_and_bring_faces_to_the_surface
         S = np.concatenate([X.mean(1), (X[:, 0] + X[:, 1]) / 2, (X[:, 1] + X[:, 2]) / 2, (X[:, 2] + X[:, 0]) / 2])
         return np.abs(1 - np.hypot(S[:, 0], S[:, 2])).max()
     assert worst(rec.mesh) < worst(rec0.mesh)
+
+
+def test_flips_keep_the_half_edge_twins_up_to_date():
+    rng = np.random.default_rng(4)
+    t, h = rng.uniform(0, np.pi, 900), rng.uniform(0, 2.0, 900)
+    P = np.column_stack([np.cos(t), h, np.sin(t)])
+    U = np.column_stack([np.cos(t), h])        # the side view: far from 3D Delaunay
+    F0 = delaunay(U)
+    F1, twin = flip_towards_3d_delaunay(F0, P, U, 100, return_twin=True)
+    np.testing.assert_array_equal(F1, flip_towards_3d_delaunay(F0, P, U, 100))
+    assert not np.array_equal(F1, F0)
+    np.testing.assert_array_equal(twin, half_edge_twins(F1, len(P)))
+
+
+@pytest.mark.parametrize("kind", PT.WEIGHTS)
+def test_host_map_matches_the_jax_map(surface_points, kind):
+    P, _, _ = surface_points
+    g = PT.point_graph(P, 10)
+    bnd = PT.detect_boundary(P, g)
+    opts = dict(weights=kind, boundary="circle", spacing="chord",
+                symmetric=kind in ("uniform", "inverse_distance"))
+    U = np.asarray(map_points(P, g, bnd, **opts))
+    Uh = map_points(P, g, bnd, host=True, **opts)
+    assert isinstance(Uh, np.ndarray)
+    np.testing.assert_allclose(Uh, U, rtol=0, atol=1e-13)
 
 
 def test_delaunay_fallback_without_triangle_matches(monkeypatch):

@@ -14,17 +14,18 @@ from ..progress import StageBar
 from ..errors import PointCloudError
 from ..memory import reuse_freed_memory
 from ..mesh import TriMesh
+from ..topology import half_edge_twins
 from .boundary import detect_boundary
 from .defaults import (BRIDGE_FACTOR, FLIP_ROUNDS, GAP, K, K_DETECT, K_FRAME, MAX_SLOPE,
                        OUTLIER_ROUNDS)
 from .graph import (Frames, nearest_neighbours, point_graph_in_order, refresh_frames, robust_frames,
-                    spatial_order, unreachable)
+                    unreachable)
 from .outliers import drop_points, find_outliers
 from .smoothing import SMOOTHING, smooth_points
 from .meshless import (check_boundary_indices, check_map_options, check_points, map_points,
                        symmetric_solve)
 from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
-                            lone_points, long_faces, outside_bridges, peel_ears)
+                            lone_points, long_faces, longest_edges, outside_bridges, peel_ears)
 
 __all__ = ["Reconstruction", "reconstruct_surface"]
 
@@ -130,20 +131,21 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
                  max_slope, bridge_factor, flip_rounds, outliers, smooth, verbose) -> Reconstruction:
     clock = StageClock()
     mark = StageBar(clock, total=6, desc="reconstruct_surface", verbose=verbose)
-    P0, kept, index = check_points(points, k=k, merge_duplicates=merge, return_index=True)
+    P0, kept, index, perm = check_points(points, k=k, merge_duplicates=merge, return_index=True,
+                                         return_order=True)
     n_in = index.size
     merged = kept.size != n_in
     # Everything below runs on the points in Morton order (neighbours close in memory: the
     # weights, the triangulation and the flips run 1.3-2x faster on a large shuffled cloud);
     # the result is renumbered to the input's order at the end.  ``kept[perm]`` names each
     # point here by its input index.
-    perm = spatial_order(P0)
-    P = P0[perm]
+    P = P0[perm]                       # perm: spatial_order(P0)
     order = perm                       # the rows of P0 in the working order
     user = None
     if user_bnd is not None:
         user = check_boundary_indices("reconstruct_surface", user_bnd, n_in, index if merged else None)
     near = None
+    gone = []                          # (outliers, their neighbours), rows of P0, per round
     if radius is None:
         kq = min(max(k, K_DETECT, K_FRAME) + 4, len(P) - 1)
         dist, near = nearest_neighbours(P, kq)
@@ -156,6 +158,9 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
             bad = find_outliers(P, frames, dist[:, :K_FRAME], near[:, :K_FRAME]) & ~protect[order]
             if not bad.any():
                 break
+            # Each outlier's neighbours, nearest first (input rows): its nearest kept point
+            # is the first of them that stays (its UV below, without a tree over all points).
+            gone.append((order[bad], order[near[bad]]))
             keep_k = min(max(k, K_DETECT, K_FRAME), len(P) - 1 - int(bad.sum()))
             sub, P, dist, near, changed = drop_points(P, dist, near, bad, keep_k)
             order = order[sub]
@@ -188,38 +193,45 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
                                      nearest=None if near is None else (dist, near),
                                      frames=None if near is None else frames, exempt=cut_off)
     U = np.asarray(map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
-                              symmetric=symmetric_solve(weights, symmetric, radius)))
+                              symmetric=symmetric_solve(weights, symmetric, radius), host=True))
     mark("weights_and_solve")
     F = delaunay(U)
     F = F[np.argsort(F.min(axis=1), kind="stable")]     # faces in the points' (Morton) order too
     mark("delaunay")
+    twin = None                        # the faces' half-edge twins, once known (the flips keep them)
     if flip_rounds:
-        F = flip_towards_3d_delaunay(F, P, U, flip_rounds)
+        F, twin = flip_towards_3d_delaunay(F, P, U, flip_rounds, return_twin=True)
         mark("flips")
-    too_long = long_faces(F, P, graph.spacing, bridge_factor)
-    late = (lone_points(F, long_faces(F, P, graph.spacing, 2 * bridge_factor, np.min), len(P), bnd)
+    longest = longest_edges(F, P)
+    too_long = long_faces(F, P, graph.spacing, bridge_factor, longest=longest)
+    late = (lone_points(F, long_faces(F, P, graph.spacing, 2 * bridge_factor, np.min, longest=longest),
+                        len(P), bnd)
             if outliers else np.zeros(0, np.int64))
+    del longest
     if late.size:
         # Points whose every face is longer than twice the bridge length (of the smallest
         # vertex spacing): outliers the neighbourhood test missed, alone or in pairs.  Triangulate again without them (their UVs stay; they stay unused).
         rest = np.setdiff1d(np.arange(len(P)), late)
         F = rest[delaunay(U[rest])]
         F = F[np.argsort(F.min(axis=1), kind="stable")]
+        twin = None
         if flip_rounds:
-            F = flip_towards_3d_delaunay(F, P, U, flip_rounds)
+            F, twin = flip_towards_3d_delaunay(F, P, U, flip_rounds, return_twin=True)
         too_long = long_faces(F, P, graph.spacing, bridge_factor)
     # Peel in one pass: the too-long faces connected to the outside through too-long faces.
-    keep = ~outside_bridges(F, too_long, len(P))
-    F = peel_ears(F[keep], P, graph)
+    twin = half_edge_twins(F, len(P)) if twin is None else twin
+    keep = ~outside_bridges(F, too_long, len(P), twin=twin)
+    keep = peel_ears(F, P, graph, twin=twin, alive=keep, return_mask=True)
     name = kept[order]                                   # working index -> input index
     dropped = np.flatnonzero(where < 0)                  # outliers, as rows of P0 (not mapped)
     # Without merged copies the outliers' rows follow the working points' (unreferenced), so
     # that the input numbering is a permutation: renumber, not build (a third of its cost).
-    F, topology = largest_manifold_disk(F, len(P) if merged else len(P0))
+    F, topology = largest_manifold_disk(F, len(P) if merged else len(P0), twin=twin, alive=keep)
+    del twin
     U0 = np.empty((len(P0), 2))
     U0[order] = U
     if dropped.size:                                     # an outlier gets its nearest kept point's UV
-        U0[dropped] = U[cKDTree(P).query(P0[dropped], 1, workers=-1)[1]]
+        U0[dropped] = U[_nearest_kept(P, P0, dropped, where, gone if smooth is None else [])]
     if merged:                                           # onto all input points, copies unused
         topology = topo.build(name[topology.faces], n_in, where="reconstruct_surface")
     else:                                                # working rows, then the outliers' rows
@@ -236,3 +248,25 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     return Reconstruction(mesh=mesh, uv=uv, boundary=name[bnd],
                           points_used=np.flatnonzero(topology.referenced), seconds=clock.seconds,
                           outliers=np.sort(np.concatenate([kept[dropped], name[late]])))
+
+
+def _nearest_kept(P: np.ndarray, P0: np.ndarray, dropped: np.ndarray, where: np.ndarray,
+                  gone: list) -> np.ndarray:
+    """``(d,)`` the working index of the kept point (``P (M, 3)``) nearest to each dropped
+    row ``dropped (d,)`` of ``P0``: the first kept one of the neighbours recorded in ``gone``
+    (``[(rows (r,), neighbours (r, q))]``, nearest first, rows of ``P0``; ``where`` maps a row
+    of ``P0`` to its working index, -1 when dropped), else a tree query over ``P``."""
+    out = np.full(dropped.size, -1, np.int64)
+    if gone:
+        rows = np.concatenate([g[0] for g in gone])
+        q = min(g[1].shape[1] for g in gone)
+        cand = where[np.concatenate([g[1][:, :q] for g in gone])]       # (r, q), -1: dropped
+        ok = cand >= 0
+        first = np.argmax(ok, axis=1)
+        slot = np.full(P0.shape[0], -1, np.int64)
+        slot[rows] = np.where(ok.any(1), cand[np.arange(rows.size), first], -1)
+        out = slot[dropped]
+    miss = out < 0
+    if miss.any():
+        out[miss] = cKDTree(P).query(P0[dropped[miss]], 1, workers=-1)[1]
+    return out

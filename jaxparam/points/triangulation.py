@@ -15,8 +15,8 @@ from ..triangles import corner_angle, face_angles, orient
 from .defaults import EAR_MAX_BASE
 from .graph import PointGraph
 
-__all__ = ["delaunay", "flip_towards_3d_delaunay", "long_faces", "lone_points", "outside_bridges",
-           "peel_ears", "largest_manifold_disk"]
+__all__ = ["delaunay", "flip_towards_3d_delaunay", "longest_edges", "long_faces", "lone_points",
+           "outside_bridges", "peel_ears", "largest_manifold_disk"]
 
 
 def delaunay(U: np.ndarray) -> np.ndarray:
@@ -46,7 +46,8 @@ def _prv(h):
     return h - h % 3 + (h + 2) % 3
 
 
-def flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int) -> np.ndarray:
+def flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds: int, *,
+                             return_twin: bool = False):
     """Flip interior edges ``a-b`` (faces ``(a, b, c)``, ``(b, a, d)``) whose opposite 3D angles
     at ``c`` and ``d`` sum to more than pi, and to more than the new diagonal's, into
     ``(a, d, c)``, ``(d, b, c)``, when both new faces keep a positive parameter-plane area.
@@ -55,7 +56,9 @@ def flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds
 
     **Arguments:** ``F (m, 3)`` a manifold triangulation, anticlockwise in ``U (N, 2)``;
     ``P (N, 3)`` the points in 3D; at most ``rounds`` rounds.  **Returns:** the new
-    ``(m, 3)`` faces (a copy; face ``f`` of a flipped pair stays at row ``f``).
+    ``(m, 3)`` faces (a copy; face ``f`` of a flipped pair stays at row ``f``); with
+    ``return_twin`` also their half-edge twins ``(3m,)``
+    (:func:`~jaxparam.topology.half_edge_twins` of the new faces, kept up to date).
 
     Half-edge ``h = 3 f + j`` runs from ``F[f, j]`` to ``F[f, j+1]``; ``twin`` is kept up to
     date through the flips, so after the first round only the edges of flipped faces (and
@@ -112,11 +115,12 @@ def flip_towards_3d_delaunay(F: np.ndarray, P: np.ndarray, U: np.ndarray, rounds
         changed = np.concatenate([g1, g2]) // 3
         angles.reshape(m, 3)[changed] = face_angles(P, F[changed])
         cand = np.concatenate([g1, g1 + 1, g1 + 2, g2, g2 + 1, g2 + 2, lost])
-    return F
+    return (F, twin) if return_twin else F
 
 
 def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: float = 0.45 * np.pi,
-              rounds: int = 3, max_base: float = EAR_MAX_BASE) -> np.ndarray:
+              rounds: int = 3, max_base: float = EAR_MAX_BASE, twin: np.ndarray | None = None,
+              alive: np.ndarray | None = None, return_mask: bool = False) -> np.ndarray:
     """Remove boundary "ears" that cover empty space: a face ``(b1, b2, p)`` whose edge
     ``b1-b2`` is on the boundary and whose third vertex ``p`` is not, when none of ``p``'s
     neighbours in ``graph`` lies inside the face's angle at ``p`` (seen in ``p``'s tangent
@@ -131,12 +135,15 @@ def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: flo
     (camelhead.xyz's three: 0.81-1.03), while a longer base is a sparse boundary whose
     triangle covers the surface (on 20k-point sets with eightfold density, peeling those left
     the source up to 1.9 % of the diagonal from the faces instead of 1.3 %).
-    **Returns:** the faces kept, in order."""
+
+    ``alive (m,) bool``: peel only within these faces (default: all); ``twin``: the
+    :func:`~jaxparam.topology.half_edge_twins` of all of ``F``, if known.
+    **Returns:** the faces kept, in order (``return_mask``: ``(m,) bool``, which faces)."""
     n, m = len(P), len(F)
     deg = np.diff(graph.indptr)
     src, dst, opp = F.reshape(-1), F[:, [1, 2, 0]].reshape(-1), F[:, [2, 0, 1]].reshape(-1)
-    twin = half_edge_twins(F, n)
-    alive = np.ones(m, bool)
+    twin = half_edge_twins(F, n) if twin is None else twin
+    alive = np.ones(m, bool) if alive is None else alive.copy()
     for _ in range(rounds):
         # Boundary half-edges: alive, with no alive face across.
         bd = np.flatnonzero(np.repeat(alive, 3) & ((twin < 0) | ~alive[np.maximum(twin, 0) // 3]))
@@ -180,22 +187,28 @@ def peel_ears(F: np.ndarray, P: np.ndarray, graph: PointGraph, *, min_angle: flo
         np.minimum.at(first, verts.reshape(-1), np.repeat(np.arange(ear.size), 3))
         ok = np.all(first[verts] == np.arange(ear.size)[:, None], axis=1)
         alive[h[ear[ok]] // 3] = False
-    return F[alive]
+    return alive if return_mask else F[alive]
+
+
+def longest_edges(F: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """``(m,)``: the longest 3D edge of each face ``F (m, 3)`` over points ``P (N, 3)``."""
+    L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    return L.max(1)
 
 
 def long_faces(F: np.ndarray, P: np.ndarray, spacing: np.ndarray, factor: float,
-               reduce=np.median) -> np.ndarray:
+               reduce=np.median, *, longest: np.ndarray | None = None) -> np.ndarray:
     """``(m,) bool``: the faces ``F (m, 3)`` whose longest 3D edge exceeds ``factor`` times the
     ``reduce`` (median, or min) of the ``spacing (N,)`` of their three vertices (``P (N, 3)``;
     not the mean, so that a vertex off the surface, whose own spacing is large, does not
-    excuse its faces)."""
-    L = np.stack([np.linalg.norm(P[F[:, i]] - P[F[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    excuse its faces).  ``longest (m,)``: :func:`longest_edges` of ``F`` already computed."""
+    longest = longest_edges(F, P) if longest is None else longest
     if reduce is np.median:        # the middle of three, exactly (np.median's sort: 10x slower)
         a, b, c = spacing[F[:, 0]], spacing[F[:, 1]], spacing[F[:, 2]]
         local = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
     else:
         local = reduce(spacing[F], axis=1)
-    return L.max(1) > factor * local
+    return longest > factor * local
 
 
 def lone_points(F: np.ndarray, long: np.ndarray, n: int, keep: np.ndarray) -> np.ndarray:
@@ -209,11 +222,13 @@ def lone_points(F: np.ndarray, long: np.ndarray, n: int, keep: np.ndarray) -> np
     return np.flatnonzero(lone)
 
 
-def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
+def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int, *,
+                    twin: np.ndarray | None = None) -> np.ndarray:
     """``(m,) bool``: the faces flagged ``bad (m,) bool`` that reach the triangulation's
-    outside through bad faces only (``F (m, 3)`` manifold over ``n`` vertices)."""
+    outside through bad faces only (``F (m, 3)`` manifold over ``n`` vertices; ``twin`` its
+    :func:`~jaxparam.topology.half_edge_twins`, if known)."""
     m = len(F)
-    twin = half_edge_twins(F, n)
+    twin = half_edge_twins(F, n) if twin is None else twin
     h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
     a, b = h // 3, twin[h] // 3
     both = bad[a] & bad[b]
@@ -229,17 +244,22 @@ def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int) -> np.ndarray:
     return mask[:m]
 
 
-def largest_manifold_disk(F: np.ndarray, n: int, *, max_rounds: int = 50):
+def largest_manifold_disk(F: np.ndarray, n: int, *, max_rounds: int = 50,
+                          twin: np.ndarray | None = None, alive: np.ndarray | None = None):
     """Make a subset ``F (m, 3)`` of a planar triangulation over ``n`` vertices a manifold
     disk: drop the faces at vertices where the boundary touches itself (more than two
     boundary edges: a bowtie left by the peeling), then keep the largest edge-connected
     component, until neither is left (at most ``max_rounds`` times).
 
+    ``alive (m,) bool``: start from these faces of ``F`` (default: all); ``twin``: the
+    :func:`~jaxparam.topology.half_edge_twins` of all of ``F``, if known.
+
     **Returns:** ``(faces, topology)``, the faces kept in their order and their
     :class:`~jaxparam.topology.Topology`."""
-    twin = half_edge_twins(F, n)              # a face subset's twins: these, or -1 across a gap
+    # A face subset's twins: these, or -1 across a gap.
+    twin = half_edge_twins(F, n) if twin is None else twin
     src = F.reshape(-1)
-    alive = np.ones(len(F), bool)
+    alive = np.ones(len(F), bool) if alive is None else alive.copy()
     for _ in range(max_rounds):
         # Boundary half-edges leaving each vertex: more than one at a bowtie.
         bd = np.repeat(alive, 3) & ((twin < 0) | ~alive[np.maximum(twin, 0) // 3])
