@@ -377,7 +377,10 @@ def _mesh_energy(en: Energy, V, F, Q):
             w22 = wa * c22 + wf * g11
             W1 = w11[:, None] * e1 + w12[:, None] * e2
             W2 = w12[:, None] * e1 + w22[:, None] * e2
-            t = t + jnp.sum(jnp.stack([-(W1 + W2), W1, W2], 1) * dV[F])
+            # Gathered by coordinate: the transpose is 3 scalar scatters, faster on the CPU
+            # than one scatter of 3-vectors (gradient 5.3 -> 4.4 ms on camelhead).
+            Wk = jnp.stack([-(W1 + W2), W1, W2], 1)
+            t = t + sum(jnp.sum(Wk[..., x] * dV[:, x][F]) for x in range(3))
         if not _is_zero(dQ):
             t = t + jnp.sum(wa[:, None, None] * gQ * dQ)
         if params and not _is_zero(dp):

@@ -523,3 +523,42 @@ def test_unconverged_minimize_warns_when_differentiated(meshes):
 
     with pytest.warns(UnconvergedGradientWarning, match="stopping point"):
         jax.grad(loss)(jnp.asarray(mesh.vertices))
+
+
+def test_solve_cache_tells_matrices_apart_that_share_a_fingerprint():
+    """The factorization cache of jaxparam.sparse.solve is found by a fingerprint of a few
+    values and confirmed by an exact comparison of all of them (issue 12: cheaper than hashing
+    every value per solve).  Two matrices that agree on the fingerprint's entries but not
+    elsewhere must not share a factorization, inside a gradient as well as eagerly."""
+    from jaxparam import linear, sparse
+    from jaxparam.sparse import differentiable as D
+
+    mesh = jp.shapes.disk(8, seed=1, height=0.3)       # nnz > 2 x the fingerprint's 64 values
+    t = mesh.topology
+    S = linear.interior_system(t)
+    w = np.asarray(jp.weights.entry_weights(mesh.vertices, t, "mean_value")[0])
+    vals, rhs = (np.asarray(a) for a in jp.combination.assemble(S, w, np.ones((t.boundary.size, 2)),
+                                                                normalize=True))
+    step = max(1, vals.size // D._FINGERPRINT)
+    off = np.flatnonzero(np.arange(vals.size) % step != 0)
+    off = off[off != vals.size - 1]
+    diag = set(S.diag_pos.tolist())
+    i = int(next(j for j in off if j in diag))             # a diagonal entry off the fingerprint
+    vals2 = vals.copy()
+    vals2[i] *= 1.5
+    assert D._fingerprint(vals) == D._fingerprint(vals2)
+    with D.cache_lock:
+        D.cache.clear()
+    x1 = np.asarray(sparse.solve(S.pattern, vals, rhs))
+    x2 = np.asarray(sparse.solve(S.pattern, vals2, rhs))
+    A1, A2 = (S.pattern.matrix(v).toarray() for v in (vals, vals2))
+    np.testing.assert_allclose(x1, np.linalg.solve(A1, rhs), atol=1e-12)
+    np.testing.assert_allclose(x2, np.linalg.solve(A2, rhs), atol=1e-12)
+    assert np.abs(x1 - x2).max() > 1e-6
+    # Under jax.grad the adjoint solve must use its own matrix's factorization.
+    g = jax.jit(jax.grad(lambda v: jnp.sum(sparse.solve(S.pattern, v, rhs) ** 2)))
+    for v, A in ((vals, A1), (vals2, A2)):
+        x = np.linalg.solve(A, rhs)
+        lam = np.linalg.solve(A.T, 2 * x)
+        want = -np.einsum("ik,jk->ij", lam, x)[S.pattern.rows, S.pattern.indices]
+        np.testing.assert_allclose(np.asarray(g(v)), want, rtol=1e-9, atol=1e-12)
