@@ -233,16 +233,38 @@ def test_every_closed_mesh_of_shared_data_at_every_base_count(name, nb):
 @pytest.mark.slow
 @pytest.mark.data
 @pytest.mark.parametrize("name, bound", [("bunny.off", 0.01), ("3holes.off", 0.01), ("rocker-arm.obj", 0.01),
-                                         ("cow.off", 0.02), ("decimated-knight.off", 0.02)])
+                                         ("cow.off", 0.0125), ("decimated-knight.off", 0.0125)])
 def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_faces(name, bound):
-    """Measured 0.83 %, 0.34 %, 0.70 %, 1.30 %, 1.19 % (Hausdorff both ways, bounding-box
-    diagonal; cow and decimated-knight were 4.6 % and 10.2 % before the rules were relaxed
-    step by step, which keeps the tips of thin parts in the base domain).  The issue's goal
-    is 0.5 % on every mesh; a regression guard until smoothing across base edges lands."""
+    """Measured 0.72 %, 0.27 %, 0.63 %, 1.00 %, 1.09 % (Hausdorff both ways, bounding-box
+    diagonal) with the samples relaxed across base edges (0.83, 0.34, 0.70, 1.30, 1.19 %
+    without; cow and decimated-knight were 4.6 % and 10.2 % before the decimation's rules
+    were relaxed step by step, which keeps the tips of thin parts in the base domain).  The
+    issue's goal is 0.5 % on every mesh; this is a regression guard."""
     mesh = jp.load(data_path("meshes", name))
     base, param = manifold_map(mesh, 100)
     rep = param.report(4, samples=20_000)
     assert rep.hausdorff < bound and rep.rms < bound / 10, rep
+
+
+@pytest.mark.data
+def test_relaxing_the_samples_across_base_edges_brings_the_remesh_closer():
+    """The default remesh relaxes the samples in the base domain (error-driven, across base
+    edges): same connectivity, the base vertices stay, the surface is followed more closely
+    (level 3 at 100 base faces, Hausdorff both ways: measured 1.98 -> 1.78 % of the diagonal,
+    RMS 0.247 -> 0.220 %
+    on decimated-knight), and ``with_vertices(V0)`` gives the same remesh."""
+    mesh = jp.load(data_path("meshes", "decimated-knight.off"))
+    base, param = manifold_map(mesh, 100)
+    plain, semi = param.remesh(3, relax=False), param.remesh(3)
+    np.testing.assert_array_equal(plain.mesh.faces, semi.mesh.faces)
+    n0 = param.base_vertices.size
+    np.testing.assert_array_equal(np.asarray(semi.mesh.vertices)[:n0], np.asarray(plain.mesh.vertices)[:n0])
+    moved = np.linalg.norm(np.asarray(semi.mesh.vertices) - np.asarray(plain.mesh.vertices), axis=1)
+    assert np.mean(moved > 1e-9) > 0.5                      # most samples moved
+    a, b = fidelity(param, plain, mesh, samples=5000), fidelity(param, semi, mesh, samples=5000)
+    assert b.hausdorff < a.hausdorff and b.rms < a.rms, (a, b)
+    np.testing.assert_array_equal(np.asarray(param.with_vertices(np.asarray(mesh.vertices)).remesh(3).mesh.vertices),
+                                  np.asarray(semi.mesh.vertices))
 
 
 def test_cli_manifold_method_and_fidelity(tmp_path):

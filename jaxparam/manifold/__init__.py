@@ -12,7 +12,9 @@ Two routes (``manifold_map(..., method=)``):
   every even ``base_faces`` from :func:`fewest_faces` up (the decimation drops its shape
   rules before it gives up).  The levels are kept (:class:`MapsHistory`), and the remesh
   runs them backwards, so each remesh vertex is the exact preimage of its base-domain point
-  (the map is a bijection by construction).
+  (the map is a bijection by construction).  Before the finest level, the remesh relaxes its
+  samples in the base domain, across base edges and error-driven
+  (:mod:`~jaxparam.manifold.relax`; ``remesh(levels, relax=False)`` turns it off).
 - ``"paths"``: the method of Floater, Hormann and Reimers (ref. [11]) described below; it
   can fail with a :class:`~jaxparam.SolverError` where paths are walled off.
 

@@ -14,12 +14,13 @@ from ..errors import MeshError, SolverError
 from ..mesh import TriMesh
 from ..io import as_mesh
 from ..remesh import Remesh
-from ..subdivision import dyadic_hierarchy, split_corner_values
+from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
 from .maps import maps_decimate
 from .overlay import base_charts, draw_faces, unfolding
+from .relax import FINEST_ITERATIONS, BaseDomain, relax_samples
 from .paths import apply_steps, refine_all, room_for_paths, trace_paths
 from .report import check_closed_manifold, fidelity
 
@@ -57,7 +58,8 @@ class ManifoldStructure:
     ``method`` the route; on the ``"maps"`` route ``vertex_bary (n, 3)`` the vertices'
     barycentric coordinates from the decimation and ``history`` there the
     :class:`~jaxparam.manifold.maps.MapsHistory` that :meth:`lift` pulls points back through
-    (the exact inverse of the decimation's map)."""
+    (the exact inverse of the decimation's map), ``positions (n, 3)`` there the input
+    positions :meth:`ManifoldParameterization.remesh` relaxes its samples with (held fixed)."""
 
     n_input: int
     steps: tuple
@@ -67,6 +69,7 @@ class ManifoldStructure:
     method: str = "paths"
     vertex_bary: np.ndarray | None = None
     history: object = None
+    positions: np.ndarray | None = None
 
 
 def _barycentric(T, p):
@@ -76,6 +79,20 @@ def _barycentric(T, p):
     l1 = ((b[:, 0] - p[:, 0]) * (c[:, 1] - p[:, 1]) - (b[:, 1] - p[:, 1]) * (c[:, 0] - p[:, 0])) / det
     l2 = ((c[:, 0] - p[:, 0]) * (a[:, 1] - p[:, 1]) - (c[:, 1] - p[:, 1]) * (a[:, 0] - p[:, 0])) / det
     return jnp.stack([l1, l2, 1.0 - l1 - l2], axis=1)
+
+
+def _dyadic_samples(F0: np.ndarray, H, level: int):
+    """The base face ``(n,)`` and barycentric coordinates ``(n, 3)`` of every vertex of level
+    ``level`` of the dyadic hierarchy ``H`` of base faces ``F0``."""
+    bary = np.broadcast_to(np.eye(3), (F0.shape[0], 3, 3)).copy()   # corner -> bary in base face
+    for _ in range(level):
+        bary = split_corner_values(bary)
+    F = H.faces[level]
+    base_of_face = np.arange(F.shape[0]) // (4 ** level)
+    # One corner per vertex gives its base face and barycentric coordinates.
+    corner = np.full(H.counts[level], -1, np.int64)
+    corner[F.ravel()[::-1]] = np.arange(F.size)[::-1]
+    return base_of_face[corner // 3], bary.reshape(-1, 3)[corner]
 
 
 def _traced(x) -> bool:
@@ -182,9 +199,17 @@ class ManifoldParameterization:
         return ManifoldParameterization(W, self.base_vertices, self.base_faces, self.region, face_uv,
                                         self.vertex_face, vbary, S)
 
-    def remesh(self, levels: int = 3) -> Remesh:
+    def remesh(self, levels: int = 3, *, relax: bool | None = None) -> Remesh:
         """The ``levels``-fold dyadic refinement of ``T^0`` mapped onto the surface (§9,
         Fig. 26 (c)), each vertex through its base triangle's chart (eq. (11)).
+
+        ``relax`` (default: on for the ``"maps"`` route): before the finest level is made,
+        relax the level ``levels - 1`` samples across base edges, error-driven
+        (:func:`~jaxparam.manifold.relax.relax_samples`), so the samples gather where the
+        surface needs them; the finest samples are then the relaxed edges' midpoints.  The
+        relaxation is computed once from the positions :func:`manifold_map` saw (held fixed,
+        like the point location), so ``param.with_vertices(V0).remesh(j)`` is
+        ``param.remesh(j)`` and the remesh stays differentiable in the positions.
 
         Differentiable in the parameterization's leaves (its mesh's positions and charts),
         so ``param.with_vertices(V).remesh(levels)`` is differentiable in ``V``.
@@ -196,18 +221,30 @@ class ManifoldParameterization:
             raise MeshError(f"manifold remesh: levels must be an integer in [0, 8], got {levels!r}.")
         F0 = np.asarray(self.base_faces, np.int64)
         H = dyadic_hierarchy(F0, int(F0.max()) + 1, levels)
-        bary = np.broadcast_to(np.eye(3), (F0.shape[0], 3, 3)).copy()   # corner -> bary in base face
-        for _ in range(levels):
-            bary = split_corner_values(bary)
-        F = H.faces[-1]
-        base_of_face = np.arange(F.shape[0]) // (4 ** levels)
-        # One corner per vertex gives its base face and barycentric coordinates.
-        corner = np.full(H.counts[-1], -1, np.int64)
-        corner[F.ravel()[::-1]] = np.arange(F.size)[::-1]
-        r = base_of_face[corner // 3]
-        q = bary.reshape(-1, 3)[corner] @ REFERENCE
-        X = self.lift(r, q)
-        return Remesh(TriMesh(X, F, validate=False, name="manifold_remesh"), H)
+        S = self.structure
+        if relax is None:
+            relax = S is not None and S.history is not None and S.positions is not None
+        if relax and levels >= 2:
+            if S is None or S.history is None or S.positions is None:
+                raise MeshError("manifold remesh: relax=True needs a parameterization made by "
+                                "jp.manifold_map(mesh, method='maps'); pass relax=False.")
+            r, b = _dyadic_samples(F0, H, levels - 1)
+            D = BaseDomain(S.positions[self.base_vertices], F0)
+            P, Fm = S.positions, np.asarray(self.mesh.faces)
+
+            def lift(region, bary):
+                face, bb = S.history.pull_back(region, bary, verbose=False)
+                return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
+
+            r, b = relax_samples(D, lift, H.faces[-2], H.parents[-1], r, b)
+            if FINEST_ITERATIONS:
+                edges = dyadic_refine(H.faces[-1], H.counts[-1])[1]
+                r, b = relax_samples(D, lift, H.faces[-1], edges, r, b, iterations=FINEST_ITERATIONS)
+                r, b = r[:H.counts[-1]], b[:H.counts[-1]]
+        else:
+            r, b = _dyadic_samples(F0, H, levels)
+        X = self.lift(r, b @ REFERENCE)
+        return Remesh(TriMesh(X, H.faces[-1], validate=False, name="manifold_remesh"), H)
 
     def report(self, levels: int = 4, *, samples: int = 20_000, seed: int = 0):
         """How faithful the level-``levels`` remesh is: a
@@ -349,7 +386,7 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     U = unfolding(F0, kept.size, base_charts(V[kept], F0))
     region, face_uv = draw_faces(mesh.faces, vface, vbary, U)
     S = ManifoldStructure(mesh.n_vertices, (), mesh.topology, None, located_uv=face_uv,
-                          method="maps", vertex_bary=vbary, history=history)
+                          method="maps", vertex_bary=vbary, history=history, positions=V)
     base = TriMesh(V[kept], F0, base_topo, validate=False, name="base_domain")
     W = TriMesh(V, mesh.faces, mesh.topology, validate=False, name=mesh.name)
     return base, ManifoldParameterization(W, kept, F0, region, face_uv, vface, vbary, S)
