@@ -398,3 +398,44 @@ def test_atlas_takes_a_trimesh_or_a_pair_and_refuses_other_types():
     np.testing.assert_array_equal(a.uv_faces, b.uv_faces)
     with pytest.raises(TypeError, match="atlas"):
         jp.atlas({"vertices": sphere.vertices})
+
+
+def test_chart_start_and_checks_compile_nothing_and_match_the_jax_kernels():
+    """A split round's new chart-mesh shapes compile nothing outside the minimizer (issue 18):
+    the convex start, the rescale, the per-chart checks and the stats run in NumPy, equal to
+    the JAX kernels (geometry, metrics.face_distortion, linear.solve_interior) to rounding."""
+    from jaxparam import geometry as geo, linear, metrics, weights as wts
+    from jaxparam.atlas import flatten as fl
+    from jaxparam.atlas.result import atlas_stats
+    g = jp.shapes.graph_surface(11, jitter=0.2, seed=3)         # a size no other atlas test uses
+    V, F = np.asarray(g.vertices), g.faces
+    chart = (V[F].mean(1)[:, 0] > 0.4).astype(np.int64)          # two disks side by side
+    cm = fl.chart_mesh(V, F, chart)
+    names = []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda n, s, **kw: names.append(n) if n == "/jax/core/compile/backend_compile_duration"
+        else None)
+    uv0 = fl.convex_start(cm)
+    q = fl.chart_quality(cm, uv0)
+    corner_uv = uv0[cm.mesh.faces]
+    uv, uvf = corner_uv.reshape(-1, 2), np.arange(3 * F.shape[0]).reshape(-1, 3)
+    st = atlas_stats(V, F, uv, uvf, chart, np.zeros((0, 2), np.int64), 0, 0, {})
+    assert names == []
+    # the JAX twins (compiling) give the same start and checks to rounding
+    t = cm.mesh.topology
+    Vc = np.asarray(cm.mesh.vertices)
+    w, sym = wts.entry_weights(Vc, t, "shape_preserving")
+    b = uv0[t.boundary]
+    ref = np.asarray(linear.solve_interior(t, w, jnp.asarray(b), symmetric=sym))
+    np.testing.assert_allclose(uv0[t.interior], ref, rtol=0, atol=1e-13 * np.ptp(uv0))
+    qj = metrics.face_distortion(cm.mesh, uv0)
+    np.testing.assert_allclose(q["area3d"], np.bincount(chart, np.asarray(qj["area3d"])), rtol=1e-13)
+    auv = np.asarray(geo.signed_areas(jnp.asarray(uv0), cm.mesh.faces))
+    np.testing.assert_allclose(np.bincount(chart, auv), q["area3d"], rtol=1e-12)   # rescaled to 3D area
+    assert q["flips"].tolist() == [0, 0] and q["overlaps"].tolist() == [0, 0]
+    s1, s2 = np.asarray(qj["s1"]), np.asarray(qj["s2"])
+    np.testing.assert_allclose(q["max_aspect"],
+                               [np.max(s1[chart == k] / s2[chart == k]) for k in (0, 1)], rtol=1e-12)
+    assert st.charts == 2 and st.flips == 0
+    assert abs(st.coverage - float(np.sum(q["area3d"]))) < 1e-12 * st.coverage
+    assert 4.0 <= st.sym_dirichlet < 8.0 and st.max_aspect >= 1.0

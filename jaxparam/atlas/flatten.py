@@ -7,15 +7,20 @@ solve gives every chart's convex-combination map (each boundary loop on its own 
 chord-length spaced, the interior by the chosen weights); one
 :class:`~jaxparam.optimize.Problem` minimizes the energy over all charts (their Hessian
 blocks do not couple), so compilation happens once per atlas, not once per chart.
+
+Everything here but the minimization runs on concrete arrays in NumPy
+(:mod:`jaxparam.host` twins, the host assembly and factorization of eq. (4)): a split
+round's new chart-mesh shapes then compile nothing outside the minimizer's bucketed
+kernels (issue 18).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import jax.numpy as jnp
 import numpy as np
 
-from .. import geometry as geo
+from .. import combination as comb
+from .. import host
 from .. import linear
 from .. import metrics
 from .. import topology as topo
@@ -65,7 +70,7 @@ def convex_start(cm: ChartMesh, *, weights: str = "shape_preserving") -> np.ndar
     """
     t = cm.mesh.topology
     V = np.asarray(cm.mesh.vertices, np.float64)
-    areas = np.asarray(geo.face_areas(jnp.asarray(V), t.faces))
+    areas = host.face_areas(V, t.faces)
     area_c = np.bincount(cm.chart, weights=areas, minlength=cm.n_charts)
     uv = np.zeros((t.n_vertices, 2))
     loops = t.boundary_loops
@@ -82,19 +87,20 @@ def convex_start(cm: ChartMesh, *, weights: str = "shape_preserving") -> np.ndar
     r = np.sqrt(area_c[cm.uv_chart[L]] / np.pi)
     uv[L] = r[:, None] * np.stack([np.cos(theta), np.sin(theta)], 1)
     if t.interior.size:
-        w, sym = wts.entry_weights(V, t, weights)
-        x = linear.solve_interior(t, w, jnp.asarray(uv[t.boundary]), symmetric=sym)
-        uv[t.interior] = np.asarray(x)
+        # Host weights, assembly and factorization: no kernel traced for a new shape.
+        w, sym = wts.entry_weights(V, t, weights, host=True)
+        S = linear.interior_system(t)
+        vals, rhs = comb.assemble(S, w, uv[t.boundary], normalize=False, host=True)
+        uv[t.interior] = np.asarray(comb.solve(S, vals, rhs, symmetric=sym))
     return rescale(cm, uv)
 
 
 def rescale(cm: ChartMesh, uv: np.ndarray) -> np.ndarray:
     """Each chart's UVs recentred and scaled so its UV area equals its 3D area."""
     F = cm.mesh.faces
-    V = jnp.asarray(cm.mesh.vertices, jnp.float64)
-    a3 = np.bincount(cm.chart, weights=np.asarray(geo.face_areas(V, F)), minlength=cm.n_charts)
-    auv = np.bincount(cm.chart, weights=np.asarray(geo.signed_areas(jnp.asarray(uv), F)),
-                      minlength=cm.n_charts)
+    V = np.asarray(cm.mesh.vertices, np.float64)
+    a3 = np.bincount(cm.chart, weights=host.face_areas(V, F), minlength=cm.n_charts)
+    auv = np.bincount(cm.chart, weights=host.signed_areas(uv, F), minlength=cm.n_charts)
     cnt = np.bincount(cm.uv_chart, minlength=cm.n_charts)
     c = np.stack([np.bincount(cm.uv_chart, weights=uv[:, k], minlength=cm.n_charts) for k in (0, 1)], 1)
     c /= np.maximum(cnt, 1)[:, None]
@@ -118,7 +124,8 @@ def chart_quality(cm: ChartMesh, uv: np.ndarray) -> dict:
     self-crossings, :func:`jaxparam.metrics.boundary_overlaps` with the charts moved
     apart), ``max_aspect (c,)`` (largest ``s1/s2``), ``sym_dirichlet (c,)`` (area-weighted
     mean of ``s1^2 + s2^2 + s1^-2 + s2^-2``, 4 for an isometry) and ``area3d (c,)``."""
-    q = metrics.face_distortion(cm.mesh, uv)
+    q = host.face_quantities(np.asarray(cm.mesh.vertices, np.float64), cm.mesh.faces,
+                             np.asarray(uv, np.float64))     # twin of metrics.face_distortion
     s1, s2 = np.asarray(q["s1"]), np.asarray(q["s2"])
     a3, auv = np.asarray(q["area3d"]), np.asarray(q["area_uv"])
     c, k = cm.chart, cm.n_charts

@@ -4,10 +4,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-from .. import geometry as geo
+from .. import host
 from .pack import Packing
 
 __all__ = ["Atlas", "AtlasStats", "atlas_stats"]
@@ -97,16 +96,18 @@ def atlas_stats(V: np.ndarray, faces: np.ndarray, uv: np.ndarray, uv_faces: np.n
                 chart: np.ndarray, seams: np.ndarray, overlaps: int, splits: int,
                 seconds: dict) -> AtlasStats:
     """The :class:`AtlasStats` of packed UVs."""
-    Vj = jnp.asarray(V, jnp.float64)
-    a3 = np.asarray(geo.face_areas(Vj, faces))
-    auv = np.asarray(geo.signed_areas(jnp.asarray(uv), uv_faces))
+    # NumPy twins (jaxparam.host): no kernel compiled for the atlas's shapes (issue 18).
+    V = np.asarray(V, np.float64)
+    uv = np.asarray(uv, np.float64)
+    a3 = host.face_areas(V, faces)
+    auv = host.signed_areas(uv, uv_faces)
     A3, Auv = float(a3.sum()), float(auv.sum())
     k = int(chart.max()) + 1
     per_chart = np.bincount(chart, weights=auv, minlength=k)
-    frames = geo.local_frames(Vj, faces)
-    U = jnp.asarray(uv * np.sqrt(A3 / Auv))[uv_faces]
-    J = jax.vmap(geo.jacobian_from_frame)(frames, U)
-    s1, s2 = (np.asarray(s) for s in geo.singular_values(J))
+    corners = np.arange(3 * faces.shape[0]).reshape(-1, 3)      # faces and UV faces corner by corner
+    q = host.face_quantities(V[faces].reshape(-1, 3), corners,
+                             (uv * np.sqrt(A3 / Auv))[uv_faces].reshape(-1, 2))
+    s1, s2 = q["s1"], q["s2"]
     with np.errstate(divide="ignore", invalid="ignore"):
         sd = s1 ** 2 + s2 ** 2 + s1 ** -2.0 + s2 ** -2.0
         aspect = np.abs(s1) / np.abs(s2)
