@@ -419,22 +419,28 @@ def fan_weights(points, entries: FanEntries, kind: str):
     if kind not in FAN_KINDS:
         raise MeshError(f"weights: unknown fan weights {kind!r}; use one of {FAN_KINDS}.")
     E = entries
+    # A fan's entries are contiguous and in fan order, so the next (previous) neighbour of
+    # entry e is entry e + 1 (e - 1), cyclically within its row.
+    e = np.arange(E.row.size)
+    nxt = np.where(e + 1 < E.row_end, e + 1, E.row_start)
+    prv = np.where(e > E.row_start, e - 1, E.row_end - 1)
     P = points if isinstance(points, jax.core.Tracer) else jnp.asarray(points, dtype=jnp.float64)
-    return _fan_kernel(P, E.center, E.nbr, E.next, E.prev, E.row, E.row_start, E.row_end, E.degree,
+    return _fan_kernel(P, E.center, E.nbr, nxt, prv, E.row, E.row_start, E.row_end, E.degree,
                        kind=kind, n_rows=E.n_rows,
                        max_degree=loop_bound(int(E.degree.max())) if kind == "shape_preserving" else 0)
 
 
-def _angle(a, b):
-    # Unsigned: kinks where a, b are parallel (0) or antiparallel (pi); see fan_weights.
-    return jnp.arctan2(safe_norm(jnp.cross(a, b)), jnp.sum(a * b, -1))
-
-
 @functools.partial(jax.jit, static_argnames=("kind", "n_rows", "max_degree"))
-def _fan_kernel(P, center, nbr, nxt, prev, row, row_start, row_end, degree, *, kind, n_rows,
+def _fan_kernel(P, center, nbr, nxt, prv, row, row_start, row_end, degree, *, kind, n_rows,
                 max_degree):
-    x = P[center]
-    d = P[nbr] - x
-    return weights_from_angles(kind, _angle(d, P[nxt] - x), _angle(P[prev] - x, d), safe_norm(d),
+    # Each direction d_j = w_j - v is gathered once and each fan angle computed once (entry j's
+    # previous angle is entry j-1's): the reverse pass scatters two 3-vectors per entry into
+    # (N, 3) instead of four (issue 12: the meshless mean-value gradient 157 -> 78 ms on
+    # camelhead).  The angle is unsigned: it kinks where d_j, d_{j+1} are parallel (0) or
+    # antiparallel (pi); see fan_weights.
+    d = P[nbr] - P[center]
+    b = d.at[nxt].get(unique_indices=True)
+    angle = jnp.arctan2(safe_norm(jnp.cross(d, b)), jnp.sum(d * b, -1))
+    return weights_from_angles(kind, angle, angle.at[prv].get(unique_indices=True), safe_norm(d),
                                row, row_start, row_end, degree, n_rows=n_rows,
                                max_degree=max_degree)
