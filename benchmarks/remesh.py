@@ -37,6 +37,19 @@ import numpy as np
 DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "meshes" / "camelhead.off"
 
 
+def disk_meshes(folder: Path):
+    """``(path, mesh)`` for every mesh file in ``folder`` (sorted) that loads and is a disk."""
+    import jaxparam as jp
+
+    for path in sorted(folder.iterdir()):
+        try:
+            mesh = jp.load(path)
+        except jp.MeshError:
+            continue
+        if mesh.topology.is_disk:
+            yield path, mesh
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--refine", type=int, nargs="*", default=[0, 1, 2])
@@ -102,13 +115,7 @@ def main() -> int:
         folder = DATA.parent
         print(f"\ndefault remesh (area-aware map), level by level: Hausdorff / RMS, % of the diagonal "
               f"({args.samples} samples per surface)")
-        for path in sorted(folder.iterdir()):
-            try:
-                mesh = jp.load(path)
-            except jp.MeshError:
-                continue
-            if not mesh.topology.is_disk:
-                continue
+        for path, mesh in disk_meshes(folder):
             t = time.perf_counter()
             semi = jp.remesh(mesh, levels=6, errors=False)
             sec = time.perf_counter() - t
@@ -127,13 +134,7 @@ def main() -> int:
     if args.compress_all:
         print(f"\n5 % of the coefficients kept, level-6 default remesh: vertex RMS / surface RMS "
               f"over the lazy wavelet's ({args.samples} samples per surface)")
-        for path in sorted(DATA.parent.iterdir()):
-            try:
-                mesh = jp.load(path)
-            except jp.MeshError:
-                continue
-            if not mesh.topology.is_disk:
-                continue
+        for path, mesh in disk_meshes(DATA.parent):
             semi = jp.remesh(mesh, levels=6)
             errs = {w: errors(semi, jp.wavelets.compress(semi, 0.05, wavelet=w)) for w in jp.wavelets.WAVELETS}
             lazy = errs["lazy"]

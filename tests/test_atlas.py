@@ -154,16 +154,22 @@ def test_packing_keeps_margin_and_orientation():
     assert area * P.scale ** 2 >= 0.6
 
 
+def _u_and_blobs():
+    """A 40-cell U-shaped mask, then 14 elliptic blobs of radius 2.5-9 cells (seeded)."""
+    U = np.ones((40, 40), bool)
+    U[8:, 12:28] = False
+    masks = [U]
+    for r in np.random.default_rng(3).uniform(2.5, 9.0, 14):
+        y, x = np.mgrid[: int(2 * r) + 1, : int(2 * r) + 1] - r
+        masks.append(x ** 2 + (1.6 * y) ** 2 <= r ** 2)
+    return masks
+
+
 def test_place_square_fills_holes_and_keeps_margins():
     # a U-shaped mask, then blobs: the small ones go into the U's cavity (the bounding
     # square does not grow), and no two placed masks come within the margin
-    U = np.ones((40, 40), bool)
-    U[8:, 12:28] = False
-    rng = np.random.default_rng(3)
-    masks = [U]
-    for r in rng.uniform(2.5, 9.0, 14):
-        y, x = np.mgrid[: int(2 * r) + 1, : int(2 * r) + 1] - r
-        masks.append(x ** 2 + (1.6 * y) ** 2 <= r ** 2)
+    masks = _u_and_blobs()
+    U = masks[0]
     margin = 2
     pos, turn, side = pack.place_square(masks, 120, margin)
     cap = 120
@@ -196,13 +202,8 @@ def test_fill_square_is_bottom_left_and_keeps_margins():
     # the U and blobs of the test above in a fixed 64-cell square: every mask inside it,
     # none within the margin of another, none that could move one cell lower, and
     # None when the masks' area exceeds the square
-    U = np.ones((40, 40), bool)
-    U[8:, 12:28] = False
-    rng = np.random.default_rng(3)
-    masks = [U]
-    for r in rng.uniform(2.5, 9.0, 14):
-        y, x = np.mgrid[: int(2 * r) + 1, : int(2 * r) + 1] - r
-        masks.append(x ** 2 + (1.6 * y) ** 2 <= r ** 2)
+    masks = _u_and_blobs()
+    U = masks[0]
     margin, size = 2, 64
     pos, turn, side = pack.fill_square(masks, size, margin)
     assert side == size
