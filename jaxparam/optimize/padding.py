@@ -23,7 +23,6 @@ import math
 from dataclasses import dataclass
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .. import geometry as geo
@@ -116,7 +115,9 @@ def padded_arrays(vertices, faces, free, base, areas=None) -> Padded:
     Bp[ghost] = _GHOST_UV
     fp = np.full(K, N - 4, np.int64)
     fp[:k] = free
-    Vj, Fj = jnp.asarray(Vp), jnp.asarray(Fp)
+    # device_put, not jnp.asarray: in this JAX, jnp.asarray of a NumPy array compiles a
+    # conversion kernel per new shape; device_put compiles nothing.
+    Vj, Fj = jax.device_put(Vp), jax.device_put(Fp)
     if config.buckets:          # one fused kernel a bucket (rounds like the eager ops to 1e-17)
         frames, A = _frames_and_areas(Vj, Fj)
         A = np.array(A)
@@ -125,8 +126,8 @@ def padded_arrays(vertices, faces, free, base, areas=None) -> Padded:
     A[m:] = 0.0
     if areas is not None:
         A[:m] = np.asarray(areas, np.float64)
-    return Padded(base=jnp.asarray(Bp), free=jnp.asarray(fp), F=jnp.asarray(Fp), frames=frames,
-                  areas=jnp.asarray(A), D=jacobian_maps(frames), k=k, m=m)
+    return Padded(base=jax.device_put(Bp), free=jax.device_put(fp), F=Fj, frames=frames,
+                  areas=jax.device_put(A), D=jacobian_maps(frames), k=k, m=m)
 
 
 def pad_positions(pos: np.ndarray, m_padded: int) -> np.ndarray:
