@@ -248,7 +248,7 @@ class Problem:
     def padded_positions(self):
         """``(M * 36,)`` device array: :attr:`hessian_pattern`'s ``pos`` at the padded face
         count (``-1``, nowhere, for the ghost faces)."""
-        return jnp.asarray(pad_positions(self.hessian_pattern.pos, int(self.padded.F.shape[0])))
+        return jax.device_put(pad_positions(self.hessian_pattern.pos, int(self.padded.F.shape[0])))
 
     def normalize(self, x):
         """Free boundary, scale-invariant energy: recentre and rescale to the start's area
