@@ -127,8 +127,7 @@ def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, s
         uv = np.full((t.n_vertices, 2), np.nan)
         uv[t.interior], uv[t.boundary] = x, uv_b
         return uv[: mesh.n_vertices] if added else uv
-    vals, rhs = comb.assemble(S, w, uv_b, normalize=normalize)
-    x = comb.solve(S, vals, rhs, symmetric=symmetric, backend=backend)
+    x = comb.solve_weights(S, w, uv_b, normalize=normalize, symmetric=symmetric, backend=backend)
     uv = comb.scatter(x, uv_b, t.interior, t.boundary, n=t.n_vertices)
     return uv[: mesh.n_vertices] if added else uv
 

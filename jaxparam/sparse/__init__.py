@@ -18,7 +18,8 @@ Backends (:func:`available_backends`, fastest first):
 ``backend="auto"`` takes PARDISO when it loads, else CHOLMOD for symmetric
 matrices, else SuperLU.  A backend that fails to factorize hands the matrix
 to SuperLU; every solve checks its relative residual against
-:data:`jaxparam.tol.SOLVE_RESIDUAL` and is redone once with SuperLU above it.
+:data:`jaxparam.tol.SOLVE_RESIDUAL` and is redone once with SuperLU above it (the adjoint
+solves of reverse mode only until the factor has passed that check once).
 
 :func:`solve` is differentiable in JAX, in both modes from one definition (a
 ``jax.lax.custom_linear_solve``): forward ``A x = b`` with a cached factorization;

@@ -4,5 +4,7 @@ from __future__ import annotations
 
 #: Counters for tests and benchmarks: numeric factorizations, PARDISO symbolic analyses,
 #: solves (each ``Factorization.solve`` call), hits of :func:`solve`'s factorization
-#: cache, and hand-overs to SuperLU (failed factorization or residual too large).
-stats = {"factorizations": 0, "analyses": 0, "solves": 0, "cache_hits": 0, "fallbacks": 0}
+#: cache, hand-overs to SuperLU (failed factorization or residual too large), and derivative
+#: solves whose residual check was skipped (their factor had passed it: ``Factorization._solve``).
+stats = {"factorizations": 0, "analyses": 0, "solves": 0, "cache_hits": 0, "fallbacks": 0,
+         "checks_skipped": 0}

@@ -85,7 +85,10 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
     - Reverse (``jax.grad``, ``jax.vjp``, ``jax.jacrev``): JAX transposes that
       linear map: one solve ``A^T lam = g``, then ``d rhs = lam`` and
       ``d A_ij = -lam_i . x_j`` on the pattern (one factorization, two solves
-      per gradient, as before).
+      per gradient, as before).  The adjoint solve skips the residual check
+      when the factor has passed it already (on the forward solve; see
+      ``Factorization._solve`` for why that is sound), and checks only that
+      ``lam`` is finite; a factor that has not been checked yet is checked.
     - Higher order and mixed (``jax.hessian``, grad of grad, ``jacfwd`` of
       ``grad``): the derivative solves are again linear solves of the same
       kind, so they differentiate the same way (each order adds solves with
@@ -99,7 +102,9 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
       overflow the cache, so their derivative solves factorize again).  The
       batched result equals a Python loop of solves to rounding (bitwise
       while a shared matrix's block has at most 8 columns; PARDISO's blocked
-      multi-column solve above that differs in the last bits).  All
+      multi-column solve above that differs in the last bits, and so does
+      its transposed LU solve, the adjoint of reverse mode, which is always
+      blocked).  All
       members of a batch must share the pattern.
 
     The derivatives are those of ``A^{-1} rhs`` as a function of every stored
@@ -140,8 +145,11 @@ def _first(a: np.ndarray) -> np.ndarray:
     return a[(0,) * (a.ndim - 1)]
 
 
-def _host_solve(symmetric, backend, transpose, core_ndim, values, b, indptr, indices, uid):
+def _host_solve(symmetric, backend, transpose, trust, core_ndim, values, b, indptr, indices, uid):
     """The host side of the callback: ``A^{-1} b`` (``A^{-T} b`` if ``transpose``).
+
+    ``trust``: the derivative (adjoint) solve, whose residual check is skipped when the factor
+    has passed one already (``Factorization.solve``'s ``trust_checked``).
 
     Unbatched: ``values (nnz,)``, ``b`` of ``core_ndim`` axes.  Under ``vmap`` (``expand_dims``)
     every argument has the same number of leading batch axes, of size 1 where unbatched; the
@@ -155,7 +163,8 @@ def _host_solve(symmetric, backend, transpose, core_ndim, values, b, indptr, ind
     pattern = pattern_for_uid(int(uids[0]), _first(np.asarray(indptr)), _first(np.asarray(indices)))
 
     def solve_with(fac, rhs):
-        return (fac.solve_transpose(rhs) if transpose else fac.solve(rhs)).reshape(rhs.shape)
+        return (fac.solve_transpose(rhs, trust_checked=trust) if transpose
+                else fac.solve(rhs, trust_checked=trust)).reshape(rhs.shape)
 
     vlead, blead = values.shape[:-1], b.shape[:b.ndim - core_ndim]
     if not vlead and not blead:
@@ -181,8 +190,8 @@ def _host_solve(symmetric, backend, transpose, core_ndim, values, b, indptr, ind
     return x.reshape(lead + core)
 
 
-def _callback(symmetric, backend, transpose, values, b, indptr, cols, uid):
-    return jax.pure_callback(functools.partial(_host_solve, symmetric, backend, transpose, b.ndim),
+def _callback(symmetric, backend, transpose, trust, values, b, indptr, cols, uid):
+    return jax.pure_callback(functools.partial(_host_solve, symmetric, backend, transpose, trust, b.ndim),
                              jax.ShapeDtypeStruct(b.shape, jnp.float64), values, b, indptr, cols, uid,
                              vmap_method="expand_dims")
 
@@ -196,14 +205,14 @@ def _solve_jit(values, rhs, rows, cols, indptr, uid, *, symmetric, backend):
         return jax.ops.segment_sum(prod, rows, num_segments=n)
 
     def solve_a(_, b):
-        return _callback(symmetric, backend, False, values, b, indptr, cols, uid)
+        return _callback(symmetric, backend, False, False, values, b, indptr, cols, uid)
 
-    def solve_at(_, b):
-        return _callback(symmetric, backend, True, values, b, indptr, cols, uid)
+    def solve_at(_, b):   # the adjoint: A^T (= A if symmetric), after the forward solve's check
+        return _callback(symmetric, backend, not symmetric, True, values, b, indptr, cols, uid)
 
     # Not custom_linear_solve's symmetric=True even when A = A^T: that would take A's own product
     # as the transpose's, whose derivative in the values is dA, not dA^T; the values are
     # independent entries, so from the second order on the derivatives would be those of a
     # different function for unsymmetric tangents.  JAX transposes the product instead (exact at
     # every order); the host still solves A^T = A with A's factor.
-    return jax.lax.custom_linear_solve(matvec, rhs, solve_a, solve_a if symmetric else solve_at)
+    return jax.lax.custom_linear_solve(matvec, rhs, solve_a, solve_at)

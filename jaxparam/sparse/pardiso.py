@@ -160,9 +160,12 @@ class _PardisoHandle:
             if self.owner[slot] != token:
                 slot = self.factor(token, a)
             self.used[slot] = next(self._clock)
-            if b.ndim == 2 and 1 < b.shape[1] <= 8:
+            if b.ndim == 2 and 1 < b.shape[1] <= 8 and (self.symmetric or not transpose):
                 # PARDISO's blocked multi-RHS solve costs 3-6x one column for k <= 8 (705k grid:
                 # 0.08 s for one column, 0.5-0.6 s for two): solve the columns one by one.
+                # Not the transposed LU solve (the adjoint of reverse mode): blocked, its 2 columns
+                # take 0.85x the time of one by one at 11k unknowns (camelhead), 0.95x at 89k
+                # (a 300 x 300 grid); pinned CPU time (issue 12).  Reproducible run to run.
                 x = np.stack([self._call(33, a, slot + 1, b[:, j], transpose) for j in range(b.shape[1])], 1)
             else:
                 x = self._call(33, a, slot + 1, b, transpose)
