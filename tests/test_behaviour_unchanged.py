@@ -46,7 +46,8 @@ def test_minimize_unchanged():
         name, energy, _ = key.split("/")
         mesh = jp.load(record.DATA / name)
         e_got, e_want = (float(jp.ENERGIES[energy](mesh, x)) for x in (uv, ref))
-        assert abs(e_got - e_want) <= 1e-10 * abs(e_want), (key, e_got, e_want)
+        # (+ 1e-15: grid/arap/free's optimum is an isometry, its energy ~1e-19 is rounding)
+        assert abs(e_got - e_want) <= 1e-10 * abs(e_want) + 1e-15, (key, e_got, e_want)
         extent = float(np.ptp(ref, axis=0).max())
         np.testing.assert_allclose(rigidly_aligned(uv, ref), ref, rtol=0, atol=1e-7 * extent,
                                    err_msg=key)

@@ -134,6 +134,23 @@ def test_analytic_eigensystem_projection_matches_eigh(name):
         np.testing.assert_allclose(got, ref, atol=1e-10 * np.abs(ref).max())
 
 
+def test_face_hessian_pull_back_matches_the_dense_product():
+    # newton._pull_back writes D^T H_J D out from D's block structure (issue 17): it must equal
+    # the dense product for real Jacobian maps (random triangles) and random symmetric H_J.
+    from jaxparam.optimize.newton import _pull_back
+    from jaxparam.optimize.problem import jacobian_maps
+    rng = np.random.default_rng(5)
+    V = rng.standard_normal((30, 3))
+    F = np.stack([np.arange(10), np.arange(10, 20), np.arange(20, 30)], axis=1)
+    D = jacobian_maps(jp.geometry.local_frames(jnp.asarray(V), F))
+    A = rng.standard_normal((10, 4, 4))
+    HJ = jnp.asarray(A + A.transpose(0, 2, 1))
+    ref = np.einsum("mai,mab,mbj->mij", np.asarray(D), np.asarray(HJ), np.asarray(D))
+    got = np.asarray(_pull_back(HJ, D))
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    assert np.array_equal(got, got.transpose(0, 2, 1))
+
+
 def test_solver_registry_names_classes_and_instances(mesh, start):
     from jaxparam import optimize as O
     assert O.SOLVERS == {"newton": O.Newton, "lbfgs": O.LBFGS, "bfgs": O.BFGS,

@@ -41,10 +41,12 @@ def projected_sv_hessian(J, f):
     U, V = rot(ph), rot(-th)
     g = jax.grad(lambda s: f(s[0], s[1]))(jnp.stack([s1, s2]))
     h = jax.hessian(lambda s: f(s[0], s[1]))(jnp.stack([s1, s2]))
-    mode = lambda M: (U @ M @ V.T).reshape(-1)
-    d1, d2 = mode(jnp.diag(jnp.array([1.0, 0.0]))), mode(jnp.diag(jnp.array([0.0, 1.0])))
-    tw = mode(jnp.array([[0.0, -1.0], [1.0, 0.0]])) / jnp.sqrt(2.0)
-    fl = mode(jnp.array([[0.0, 1.0], [1.0, 0.0]])) / jnp.sqrt(2.0)
+    # U M V^T = sum_ij M_ij u_i v_j^T, as outer products of the columns (elementwise under
+    # vmap: a batched 2x2 matmul costs more on the CPU).
+    mode = lambda i, j: jnp.outer(U[:, i], V[:, j]).reshape(-1)
+    d1, d2 = mode(0, 0), mode(1, 1)
+    tw = (mode(1, 0) - mode(0, 1)) / jnp.sqrt(2.0)
+    fl = (mode(0, 1) + mode(1, 0)) / jnp.sqrt(2.0)
     gap = s1 - s2
     close = jnp.abs(gap) <= 1e-8 * jnp.abs(s1)
     lam_flip = jnp.where(close, h[0, 0] - h[0, 1], (g[0] - g[1]) / jnp.where(close, 1.0, gap))
@@ -91,7 +93,7 @@ def face_hessians(x, base, free, F, frames, areas, params, D, *, en, project):
             if project:
                 HJ = psd_project(jnp.where(jnp.isfinite(HJ), HJ, 0.0))
         HJ = jnp.where(jnp.isfinite(HJ), HJ, 0.0)
-        H = jnp.einsum("mai,mab,mbj->mij", D, HJ, D)
+        H = _pull_back(HJ, D)
     else:
         def h(frame, q):
             return jax.hessian(lambda qq: fns.density(frame, qq.reshape(3, 2)))(q)
@@ -100,6 +102,29 @@ def face_hessians(x, base, free, F, frames, areas, params, D, *, en, project):
         if project:
             H = psd_project(H)
     return H * w[:, None, None]
+
+
+def _pull_back(HJ, D):
+    """``(m, 6, 6)``: ``D^T H_J D`` for symmetric ``H_J (m, 4, 4)`` and the Jacobian maps
+    ``D (m, 4, 6)`` (:func:`~jaxparam.optimize.problem.jacobian_maps`).
+
+    ``J = [q1 - q0, q2 - q0] P^{-1}``: row ``i`` of ``J`` depends on the corners' ``i``-th
+    UV coordinate only, so ``D[2 i + c, 2 a + i] = G[c, a]`` with ``G = D[:, 0:2, 0::2]``
+    (``(m, 2, 3)``, the face's gradient operator) and zero elsewhere.  The 21 distinct
+    entries are written out on ``(m,)`` columns, which XLA fuses into one loop: 4x
+    faster on the CPU than a batched ``einsum`` of the dense 4x6 maps.
+    """
+    g = [[D[:, c, 2 * a] for a in range(3)] for c in range(2)]
+    h = [[HJ[:, k, l] for l in range(4)] for k in range(4)]
+    # (H_J D)[k, 2 b + j] = sum_d H_J[k, 2 j + d] G[d, b]
+    T = [[h[k][2 * j] * g[0][b] + h[k][2 * j + 1] * g[1][b] for b in range(3) for j in range(2)]
+         for k in range(4)]
+    out = [[None] * 6 for _ in range(6)]
+    for r in range(6):
+        a, i = divmod(r, 2)
+        for col in range(r, 6):     # (D^T H_J D)[2 a + i, col] = sum_c G[c, a] (H_J D)[2 i + c, col]
+            out[r][col] = out[col][r] = g[0][a] * T[2 * i][col] + g[1][a] * T[2 * i + 1][col]
+    return jnp.stack([jnp.stack(row, axis=-1) for row in out], axis=-2)
 
 
 @functools.partial(jax.jit, static_argnames=("nnz",))
