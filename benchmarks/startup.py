@@ -21,6 +21,13 @@ Usage::
     python benchmarks/startup.py                      # camelhead, 5 paired runs
     python benchmarks/startup.py --mesh M.off --repeat 3
     python benchmarks/startup.py --heldout --skip-in-process   # + lilium refined (26k faces)
+    python benchmarks/startup.py --methods --repeat 3          # every method, three columns
+
+``--methods`` times one call of each public method at a small size in fresh processes: its
+first call with an empty cache (**cold**), its first call in a second process that reuses the
+cache the first one filled (**warm cache**; cold and warm run back to back, a pair a round) and
+its second call in the same process (**in process**, compiled), with the whole process's wall
+time and the first call's CPU seconds (all threads) beside them.
 """
 from __future__ import annotations
 
@@ -86,6 +93,76 @@ for path in sys.argv[1:]:
 '''
 
 
+#: ``--methods``: name -> (setup, call), Python run after ``import jaxparam as jp, numpy as np``
+#: with ``M`` the shared meshes folder and ``P`` the points folder.
+METHODS = {
+    "convex_map (shape-preserving)": ("mesh = jp.load(M + '/camelhead.off')", "jp.convex_map(mesh)"),
+    "convex_map host=True": ("mesh = jp.load(M + '/camelhead.off')", "jp.convex_map(mesh, host=True)"),
+    "convex_map harmonic": ("mesh = jp.load(M + '/camelhead.off')",
+                            "jp.convex_map(mesh, weights='harmonic')"),
+    "least_squares_map": ("mesh = jp.load(M + '/camelhead.off')", "jp.least_squares_map(mesh)"),
+    "minimize sd, fixed boundary": ("mesh = jp.load(M + '/camelhead.off')",
+                                    "jp.minimize(mesh, 'symmetric_dirichlet', verbose=False)"),
+    "minimize sd, free boundary": ("mesh = jp.load(M + '/camelhead.off')",
+                                   "jp.minimize(mesh, 'symmetric_dirichlet', free_boundary=True, "
+                                   "verbose=False)"),
+    "meshless_map": ("pts = jp.load_points(P + '/camelhead.xyz')", "jp.meshless_map(pts)"),
+    "remesh, 3 levels": ("mesh = jp.load(M + '/camelhead.off'); uv = jp.convex_map(mesh, host=True)",
+                         "jp.remesh(mesh, uv, levels=3)"),
+    "manifold_map": ("mesh = jp.load(M + '/decimated-knight.off')", "jp.manifold_map(mesh, 100)"),
+    "atlas": ("mesh = jp.load(M + '/decimated-knight.off')", "jp.atlas(mesh)"),
+}
+
+METHOD_RUN = r'''
+import json, sys, time
+t0 = time.perf_counter()
+import jaxparam as jp, numpy as np
+M, P = sys.argv[1], sys.argv[2]
+exec(sys.argv[3])
+call = compile(sys.argv[4], "call", "eval")
+t, c = time.perf_counter(), time.process_time()
+eval(call)
+first, first_cpu = time.perf_counter() - t, time.process_time() - c
+exec(sys.argv[3])                      # a fresh input object (no per-object cache)
+t, c = time.perf_counter(), time.process_time()
+eval(call)
+again, again_cpu = time.perf_counter() - t, time.process_time() - c
+print(json.dumps(dict(first=first, first_cpu=first_cpu, again=again, again_cpu=again_cpu,
+                      process=time.perf_counter() - t0)))
+'''
+
+
+def method_columns(repeat: int) -> None:
+    """The ``--methods`` table: medians over ``repeat`` rounds of a cold and a warm-cache
+    process of each method, back to back."""
+    import json
+
+    points = str(MESHES.parent / "points")
+    print(f"\nevery method, fresh processes, median of {repeat} rounds (s); load "
+          f"{os.getloadavg()[0]:.1f}")
+    print(f"{'method':<32} {'cold':>7} {'warm cache':>10} {'in process':>10} {'cold CPU':>8} "
+          f"{'warm CPU':>8} {'in proc. CPU':>12} {'process cold':>12} {'warm':>6}")
+    for name, (setup, call) in METHODS.items():
+        got = {"cold": [], "warm": []}
+        for _ in range(repeat):
+            cache = tempfile.mkdtemp()
+            for col in ("cold", "warm"):
+                out = subprocess.run([PY, "-c", METHOD_RUN, str(MESHES), points, setup, call],
+                                     check=True, capture_output=True, text=True,
+                                     env={**os.environ, "JAXPARAM_CACHE": cache,
+                                          "JAXPARAM_PROGRESS": "0"}).stdout
+                got[col].append(json.loads(out.strip().splitlines()[-1]))
+        med = {col: {k: statistics.median(r[k] for r in rows) for k in rows[0]}
+               for col, rows in got.items()}
+        again = statistics.median([r["again"] for rows in got.values() for r in rows])
+        again_cpu = statistics.median([r["again_cpu"] for rows in got.values() for r in rows])
+        print(f"{name:<32} {med['cold']['first']:>7.2f} {med['warm']['first']:>10.2f} "
+              f"{again:>10.3f} {med['cold']['first_cpu']:>8.2f} {med['warm']['first_cpu']:>8.2f} "
+              f"{again_cpu:>12.3f} "
+              f"{med['cold']['process']:>12.2f} {med['warm']['process']:>6.2f}  "
+              f"(load {os.getloadavg()[0]:.1f})", flush=True)
+
+
 def timed(cmd, env=None) -> tuple[float, float]:
     """``(wall seconds, CPU seconds)`` of one run of ``cmd``: the CPU time (user + system, all
     threads) is what a loaded machine inflates least."""
@@ -139,7 +216,19 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--skip-in-process", action="store_true",
                     help="only the whole-process table")
+    ap.add_argument("--methods", action="store_true",
+                    help="only the table of every method's cold / warm-cache / in-process call")
+    ap.add_argument("--only", nargs="*", default=None,
+                    help="with --methods: the methods whose name starts with one of these")
     args = ap.parse_args()
+    if args.methods:
+        print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+              f"python {platform.python_version()}")
+        if args.only:
+            for k in [k for k in METHODS if not any(k.startswith(o) for o in args.only)]:
+                del METHODS[k]
+        method_columns(args.repeat)
+        return
     out = tempfile.mkdtemp()
     meshes = list(args.mesh) + ([heldout_mesh(out)] if args.heldout else [])
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "

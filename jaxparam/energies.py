@@ -166,10 +166,10 @@ class Energy:
         the derivative is written by hand (:func:`_mesh_energy`): the values are the
         density's own, bit for bit, and a gradient costs about two forward passes (three
         times less than JAX's derivative of the same formula; benchmarks/README.md)."""
-        V = jnp.asarray(mesh.vertices)
+        V = jnp.asarray(mesh.vertices, jnp.float64)
         if (isinstance(self.density, _OfJacobian) and V.ndim == 2 and V.shape[1] == 3
                 and isinstance(self.of_J, (_SingularValueForm, _JacobianForm))):
-            return _mesh_energy(self, V, mesh.faces, jnp.asarray(uv)[mesh.faces])
+            return _mesh_energy(self, V, mesh.faces, jnp.asarray(uv, jnp.float64)[mesh.faces])
         frames = geo.local_frames(V, mesh.faces)
         return total(self, frames, geo.face_areas(V, mesh.faces), jnp.asarray(uv)[mesh.faces])
 

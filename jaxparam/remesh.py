@@ -632,7 +632,7 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
     uvj, snap_idx, snap_pos = snap_boundary(uvj, s_all, curve, H.faces[-1])
     face, bary = locate(U, mesh.faces, uvj)
     idx = mesh.faces[face]
-    V = jnp.asarray(mesh.vertices)
+    V = jnp.asarray(mesh.vertices, jnp.float64)
     if traced:
         # The same sample points and coordinates as functions of the traced UVs (the located
         # faces, segments and wraps held fixed), clipped and normalized as locate does.
@@ -641,7 +641,7 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
             uvj = uvj.at[jnp.asarray(snap_idx)].set(uv[jnp.asarray(loop[snap_pos])])
         b = jnp.maximum(barycentric(uv[jnp.asarray(idx)], uvj, xp=jnp), 0.0)
         bary = b / jnp.sum(b, axis=1, keepdims=True)
-    X = jnp.einsum("kc,kcd->kd", jnp.asarray(bary), V[jnp.asarray(idx)])
+    X = jnp.einsum("kc,kcd->kd", jnp.asarray(bary, jnp.float64), V[jax.device_put(idx)])
     semi = Remesh(TriMesh(X, H.faces[-1], uv=uvj, validate=False, name="remesh"), H)
     if errors and not isinstance(X, jax.core.Tracer):
         semi = Remesh(semi.mesh, H, measure_errors(mesh, semi, samples=samples))

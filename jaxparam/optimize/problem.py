@@ -172,8 +172,9 @@ class Problem:
             raise SolverError("minimize: no free vertex to optimize (every vertex is on the fixed "
                               "boundary); use free_boundary=True.", stage="init")
         base = np.nan_to_num(np.asarray(uv0, np.float64))
-        self.base = jnp.asarray(base)
-        self.x0 = jnp.asarray(base[self.free].reshape(-1))
+        # device_put, not jnp.asarray: that compiles a conversion kernel per new shape here
+        self.base = jax.device_put(base)
+        self.x0 = jax.device_put(base[self.free].reshape(-1))
         self.free_boundary = free_boundary
 
     @functools.cached_property
@@ -211,7 +212,7 @@ class Problem:
         """The ``(n, 2)`` UVs (a JAX array) of the free DOFs ``x``."""
         if isinstance(x, jax.core.Tracer):
             return uv_of(x, self.base, self.free)
-        return jnp.asarray(self._host_uv(np.asarray(x, np.float64).reshape(-1, 2)))
+        return jax.device_put(self._host_uv(np.asarray(x, np.float64).reshape(-1, 2)))
 
     def value(self, x) -> float:
         """The energy at ``x``."""

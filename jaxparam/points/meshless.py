@@ -238,10 +238,10 @@ def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary:
         return U
     Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
     w = wts.fan_weights(Pj, E, weights)
-    uv_b = _boundary_map(Pj, jnp.asarray(bnd), boundary=boundary, spacing=spacing)
+    uv_b = _boundary_map(Pj, jax.device_put(bnd), boundary=boundary, spacing=spacing)
     vals, rhs = comb.assemble(system, w, uv_b, normalize=comb.normalizes(weights))
     x = comb.solve(system, vals, rhs, symmetric=symmetric)
-    return comb.scatter(x, uv_b, jnp.asarray(E.free), jnp.asarray(bnd), n=N)
+    return comb.scatter(x, uv_b, jax.device_put(E.free), jax.device_put(bnd), n=N)
 
 
 # One compiled kernel instead of a dozen eager operations (each compiled on its own for every
