@@ -233,11 +233,12 @@ def test_every_closed_mesh_of_shared_data_at_every_base_count(name, nb):
 @pytest.mark.slow
 @pytest.mark.data
 @pytest.mark.parametrize("name, bound", [("bunny.off", 0.01), ("3holes.off", 0.01), ("rocker-arm.obj", 0.01),
-                                         ("cow.off", 0.0125), ("decimated-knight.off", 0.0125)])
+                                         ("cow.off", 0.0105), ("decimated-knight.off", 0.0105)])
 def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_faces(name, bound):
-    """Measured 0.72 %, 0.27 %, 0.63 %, 1.00 %, 1.09 % (Hausdorff both ways, bounding-box
-    diagonal) with the samples relaxed across base edges (0.83, 0.34, 0.70, 1.30, 1.19 %
-    without; cow and decimated-knight were 4.6 % and 10.2 % before the decimation's rules
+    """Measured 0.72 %, 0.27 %, 0.63 %, 0.85 %, 0.94 % (Hausdorff both ways, bounding-box
+    diagonal) with the samples relaxed across base edges, and at the finest level too where
+    that is estimated closer (cow, decimated-knight; 1.00 and 1.09 % with the level-3
+    relaxation only; 0.83, 0.34, 0.70, 1.30, 1.19 % without any; cow and decimated-knight were 4.6 % and 10.2 % before the decimation's rules
     were relaxed step by step, which keeps the tips of thin parts in the base domain).  The
     issue's goal is 0.5 % on every mesh; this is a regression guard."""
     mesh = jp.load(data_path("meshes", name))
@@ -320,3 +321,46 @@ def test_default_remesh_of_a_sheared_noisy_cow_is_not_worse_than_unrelaxed():
     plain = fidelity(param, param.remesh(4, relax=False), param.mesh)
     default = fidelity(param, param.remesh(4), param.mesh)
     assert default.hausdorff <= 1.05 * plain.hausdorff, (default, plain)
+
+
+def test_grid_lift_is_exact_at_grid_points_and_for_an_affine_lift():
+    # The finest sweeps lift through a grid (one exact pull-back, then linear interpolation);
+    # the dyadic samples of the grid's level are grid points, lifted exactly.
+    from jaxparam.manifold.relax import GridLift
+
+    rng = np.random.default_rng(0)
+    A, c = rng.standard_normal((4, 3, 3)), rng.standard_normal((4, 3))
+    calls = []
+
+    def affine(r, b):                                  # an affine map per base face
+        calls.append(r.size)
+        return np.einsum("kc,kcd->kd", b, A[r]) + c[r]
+
+    g = GridLift(affine, 4, 3)
+    assert calls == [GridLift.points(4, 3)] == [4 * 9 * 10 // 2]
+    r = rng.integers(0, 4, 500)
+    b = rng.dirichlet(np.ones(3), 500)
+    b[:3] = np.eye(3)                                  # corners and edges too
+    b[3] = [0.5, 0.5, 0.0]
+    np.testing.assert_allclose(g(r, b), affine(r, b), atol=1e-12)
+    bent = GridLift(lambda r, b: np.c_[b[:, :2], (b[:, 0] * b[:, 1])[:, None]], 1, 2)
+    grid_pt = np.array([[0.25, 0.5, 0.25]])
+    np.testing.assert_array_equal(bent(np.zeros(1, int), grid_pt), [[0.25, 0.5, 0.125]])
+    mid = np.array([[0.375, 0.375, 0.25]])             # between grid points: interpolated
+    np.testing.assert_allclose(bent(np.zeros(1, int), mid), [[0.375, 0.375, 0.125]], atol=1e-15)
+
+
+def test_estimated_distance_sees_a_cut_tip_and_is_zero_on_the_input():
+    # The remesh keeps the candidate closest to the input by this estimate; it must be 0 for
+    # the input itself and see a tip that a coarser surface cuts off.
+    from jaxparam.manifold.relax import estimated_distance, sharpest_vertices
+
+    mesh = jp.shapes.sphere(2)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    tip = V.copy()
+    tip[0] *= 1.5                                       # one vertex pulled out: a tip
+    sharp = sharpest_vertices(tip, F, 10)
+    assert 0 in sharp
+    assert estimated_distance(tip, F, sharp, tip, F) < 1e-12
+    d = estimated_distance(tip, F, sharp, V, F)         # the tip cut off
+    assert d > 0.3 * np.linalg.norm(V[0])

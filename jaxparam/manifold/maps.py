@@ -366,11 +366,13 @@ class MapsHistory:
         slot = self.base_slots[np.asarray(region, np.int64)].copy()
         b = np.array(bary, np.float64)
         m = int(max(self.base_slots.max(), max((lv[0].max() for lv in self.levels), default=0))) + 1
+        entry = np.full(m, -1, np.int64)                 # reset after each level (not refilled)
         for f, which, survive, before, after in progress(reversed(self.levels), total=len(self.levels),
                                                          desc="pull back", unit="level", verbose=verbose):
-            entry = np.full(m, -1, np.int64)
-            entry[f[survive]] = np.flatnonzero(survive)
+            live = f[survive]
+            entry[live] = np.flatnonzero(survive)
             e = entry[slot]
+            entry[live] = -1
             hit = np.flatnonzero(e >= 0)
             if not hit.size:
                 continue
@@ -380,8 +382,9 @@ class MapsHistory:
             ptr = np.zeros(int(which.max()) + 2, np.int64)
             np.cumsum(np.bincount(which, minlength=int(which.max()) + 1), out=ptr[1:])
             cnt = ptr[grp + 1] - ptr[grp]
+            starts = np.cumsum(cnt) - cnt
             pi = np.repeat(np.arange(hit.size), cnt)
-            cj = np.repeat(ptr[grp], cnt) + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            cj = np.repeat(ptr[grp], cnt) + (np.arange(cnt.sum()) - np.repeat(starts, cnt))
             T = before[cj]
             qq = q[pi]
             det = _orient(T[:, 0], T[:, 1], T[:, 2])
@@ -389,9 +392,14 @@ class MapsHistory:
             l1 = _orient(T[:, 0], qq, T[:, 2]) / det
             bb = np.stack([l0, l1, 1.0 - l0 - l1], 1)
             depth = bb.min(1)
-            best = np.lexsort((-depth, pi))
-            head = best[np.concatenate([[True], pi[best][1:] != pi[best][:-1]])]
+            # Each point's deepest old wedge (the first of equals; the first where all are nan),
+            # per segment without sorting (a lexsort here was half the pull-back's time).
+            top = np.fmax.reduceat(depth, starts)
+            at = np.flatnonzero(depth == top[pi])
+            head = starts.copy()
+            first = np.concatenate([[True], pi[at][1:] != pi[at][:-1]])
+            head[pi[at[first]]] = at[first]
             nb = np.clip(bb[head], 0.0, None)
-            slot[hit[pi[head]]] = f[cj[head]]
-            b[hit[pi[head]]] = nb / nb.sum(1, keepdims=True)
+            slot[hit] = f[cj[head]]
+            b[hit] = nb / nb.sum(1, keepdims=True)
         return slot, b
