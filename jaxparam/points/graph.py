@@ -257,12 +257,14 @@ class Frames:
     radius: np.ndarray
 
 
-def refresh_frames(P: np.ndarray, near: np.ndarray, frames: Frames, rows: np.ndarray) -> Frames:
+def refresh_frames(P: np.ndarray, near: np.ndarray, frames: Frames, rows: np.ndarray, *,
+                   towards: np.ndarray | None = None) -> Frames:
     """``frames`` with the rows ``rows`` recomputed by :func:`robust_frames` from the
-    neighbours ``near (N, k)`` of ``P (N, 3)`` (after some neighbours were removed)."""
+    neighbours ``near (N, k)`` of ``P (N, 3)`` (after some neighbours were removed);
+    ``towards`` as for :func:`robust_frames`."""
     if rows.size == 0:
         return frames
-    new = robust_frames(P, near[rows], centres=rows)
+    new = robust_frames(P, near[rows], centres=rows, towards=towards)
     fields = {}
     for name in ("normal", "e1", "e2", "height", "noise", "radius"):
         a = getattr(frames, name).copy()
@@ -272,7 +274,7 @@ def refresh_frames(P: np.ndarray, near: np.ndarray, frames: Frames, rows: np.nda
 
 
 def robust_frames(P: np.ndarray, near: np.ndarray, *, rounds: int = 1,
-                  centres: np.ndarray | None = None) -> Frames:
+                  centres: np.ndarray | None = None, towards: np.ndarray | None = None) -> Frames:
     """Tangent frames of points ``P (N, 3)`` from their nearest neighbours ``near (N, k)``
     (self excluded): a weighted PCA, Gaussian in the distance (bandwidth: the mean squared
     neighbour distance) and centred at the neighbours' weighted mean, not at the point (a
@@ -283,9 +285,12 @@ def robust_frames(P: np.ndarray, near: np.ndarray, *, rounds: int = 1,
     fan's ~12 neighbours tilts normals by several degrees; 24 neighbours weighted this way
     cut that error 2-3x.  ``e1`` is a fixed direction of the plane (from the normal alone),
     since the fans and gaps only need some frame.  ``centres (M,)``: compute only the frames
-    of these points, ``near`` then being their ``(M, k)`` neighbours.
+    of these points, ``near`` then being their ``(M, k)`` neighbours.  ``towards (3,)``: the
+    direction the normals are turned to (default: the best-fit plane's normal,
+    :func:`global_frame`, an SVD of all of ``P``: pass it when calling again on the same
+    points or a few rows).
     **Returns:** :class:`Frames` (of all points, or of ``centres``)."""
-    g = global_frame(P)[2]
+    g = global_frame(P)[2] if towards is None else np.asarray(towards, np.float64)
     C = P if centres is None else P[centres]
     N = C.shape[0]
     normal, e1 = np.empty((N, 3)), np.empty((N, 3))
