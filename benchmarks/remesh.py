@@ -15,8 +15,10 @@ mesh in ``../shared/data/meshes``, each wavelet's two errors over the lazy wavel
 Part 3 (``--faithful``): the default remesh (area-aware map) of every disk mesh in
 ``../shared/data/meshes``: seconds, and per level the Hausdorff (larger way) and RMS
 distance from the input, % of the diagonal (``Remesh.errors``).  Part 4 (``--default-map``):
-seconds of ``jp.remesh(mesh)`` with its default map (``area_aware_map``, reweighted for level 6
-up to 40k faces) at each ``--refine``.
+``jp.remesh(mesh, levels=6)`` at each ``--refine``, paired in one process: its default map
+(``area_aware_map``: Newton and error-driven rounds up to 40k faces, reweighted convex maps
+above), the shape-preserving convex map and (above 40k) the Newton map the default was before
+session 9: seconds of the map and of the remesh, CPU seconds, level-6 Hausdorff and the load.
 
 Usage::
 
@@ -62,8 +64,8 @@ def main() -> int:
                     help="5 %% compression errors over lazy's, every disk mesh")
     args = ap.parse_args()
     import jaxparam as jp
-    from jaxparam.remesh import (AREA_MAP_FULL_FACES, area_aware_map, base_domain, measure_errors,
-                                 refine_domain)
+    from jaxparam.remesh import (AREA_MAP_FULL_FACES, area_aware_map, area_map_iters, base_domain,
+                                 measure_errors, refine_domain)
     from jaxparam.distance import surface_distance
     from jaxparam.triangles import locate
 
@@ -100,16 +102,30 @@ def main() -> int:
                   f"{t_all:9.3f} {off:18.1e} {peak:8.0f}", flush=True)
 
     if args.default_map:
-        print(f"\n{'input faces':>12s} {'map s':>8s} {'remesh s':>9s}  (jp.remesh(mesh, levels=6): area-aware map)")
+        print(f"\njp.remesh(mesh, levels=6), paired: the default map (area-aware: Newton and error-driven "
+              f"rounds up to {AREA_MAP_FULL_FACES} faces, reweighted convex maps above) against the "
+              f"convex map and against Newton ({args.samples} samples per surface; load = 1-min average)")
+        print(f"{'input faces':>12s} {'map':>9s} {'map s':>8s} {'remesh s':>9s} {'CPU s':>7s} "
+              f"{'L6 H %':>8s} {'load':>5s}")
         for r in args.refine:
             mesh = jp.shapes.refine(base, r) if r else base
-            t = time.perf_counter()
             big = mesh.n_faces > AREA_MAP_FULL_FACES          # as jp.remesh's default
-            uv = np.asarray(area_aware_map(mesh, levels=None if big else 6))
-            t_map = time.perf_counter() - t
-            t = time.perf_counter()
-            np.asarray(jp.remesh(mesh, uv, levels=6).mesh.vertices)
-            print(f"{mesh.n_faces:12d} {t_map:8.2f} {time.perf_counter() - t:9.2f}", flush=True)
+            maps = {"convex": lambda m: jp.convex_map(m, boundary="circle"),
+                    "default": lambda m: area_aware_map(m, levels=None if big else 6)}
+            if big:                                           # the session-8 default there
+                maps["newton"] = lambda m: area_aware_map(m, max_iters=area_map_iters(m.n_faces))
+            for name, make in maps.items():
+                load, t, c = os.getloadavg()[0], time.perf_counter(), time.process_time()
+                uv = np.asarray(make(mesh))
+                t_map = time.perf_counter() - t
+                t = time.perf_counter()
+                semi = jp.remesh(mesh, uv, levels=6)
+                t_re, cpu = time.perf_counter() - t, time.process_time() - c
+                d = surface_distance(np.asarray(mesh.vertices), mesh.faces, np.asarray(semi.mesh.vertices),
+                                     semi.mesh.faces, samples=args.samples, seed=0)
+                h = 100 * max(float(d.hausdorff_ab), float(d.hausdorff_ba))
+                print(f"{mesh.n_faces:12d} {name:>9s} {t_map:8.2f} {t_re:9.2f} {cpu:7.1f} {h:8.3f} "
+                      f"{load:5.1f}", flush=True)
 
     if args.faithful:
         folder = DATA.parent

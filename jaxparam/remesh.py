@@ -17,8 +17,10 @@ steps:
 Without a given ``psi`` the map is :func:`area_aware_map`: Sander et al.'s L2 stretch (survey
 ref. [27]) minimized flip-free inside the unit circle, so the dyadic grid samples the surface
 by area instead of squeezing its far parts, then (up to 40k faces) reweighted where the remesh
-is still far from the input (:func:`level_errors`); ``errors=True`` measures each level's distance
-from the input (:class:`RemeshErrors`).
+is still far from the input (:func:`level_errors`); above 40k faces Yoshizawa et al.'s
+reweighted convex maps instead (:mod:`jaxparam.stretch_map`: one Cholesky factorization a
+round, no Newton); ``errors=True`` measures each level's distance from the input
+(:class:`RemeshErrors`).
 
 Vertices are numbered level by level (``V^0 ⊂ V^1 ⊂ ... ⊂ V^j``), so the first ``n_l``
 vertices of the remesh are those of ``T^l``; the result, a :class:`Remesh`, carries the
@@ -53,6 +55,7 @@ from .optimize import Newton, Problem, StopRules, minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
 from .triangles import barycentric, locate, signed_area2
 from .progress import progress
+from .stretch_map import reweighted_stretch_map
 
 __all__ = ["Remesh", "RemeshErrors", "remesh", "area_aware_map", "area_map_iters", "measure_errors",
            "default_samples", "level_errors", "base_domain", "refine_domain", "snap_boundary",
@@ -411,8 +414,12 @@ def snap_boundary(uvj: np.ndarray, s: np.ndarray, curve: BoundaryCurve, faces: n
 #: :data:`AREA_MAP_FULL_FACES` faces: the stretch drops by > 99 % of its excess within about
 #: 10-15 steps on the shared disk meshes; later steps change the remesh error by under 1 %.
 AREA_MAP_ITERS = 25
-#: Above this many faces the default step count falls as ``AREA_MAP_ITERS * FULL / faces``
-#: (at least :data:`AREA_MAP_MIN_ITERS`), so the map's cost stays about flat in the mesh size.
+#: Above this many faces the default map is :func:`jaxparam.stretch_map.reweighted_stretch_map`
+#: (camelhead refined twice, 363k faces, level 6: Hausdorff 0.74 % of the diagonal instead of
+#: 6.0 % for 3 Newton steps; map + remesh 14 s instead of 86 s, 1.3x the convex map's 10.7 s at
+#: load 18); where Newton still runs there (a given ``max_iters`` or ``weights``, another energy,
+#: vertices traced under ``jax.jit``) its step count falls as ``AREA_MAP_ITERS * FULL / faces``
+#: (at least :data:`AREA_MAP_MIN_ITERS`).
 AREA_MAP_FULL_FACES = 40_000
 AREA_MAP_MIN_ITERS = 3
 #: Rounds of error-driven reweighting when :func:`area_aware_map` is given ``levels`` (what
@@ -464,7 +471,12 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     from its centre, which leaves the remesh's dyadic grid too few samples there), and the
     weight gives the regions that the input resolves finely (a scan's detail) more parameter
     area.  That default is solved as the plain stretch with per-face weights (the same
-    minimizer; closed-form projected Hessians instead of per-face automatic ones).
+    minimizer; closed-form projected Hessians instead of per-face automatic ones).  Above
+    :data:`AREA_MAP_FULL_FACES` faces (``max_iters`` and ``weights`` not given, vertex values
+    known) it is approximated by :func:`jaxparam.stretch_map.reweighted_stretch_map`: maps
+    whose weights are divided where the last one stretches, each one Cholesky factorization
+    of ``n`` unknowns where a Newton step factorizes ``2n`` (flip-free by Tutte's theorem;
+    differentiable with its reweighting factors held fixed).
 
     With ``levels`` (the default of :func:`remesh`, whose ``levels`` and ``corners`` it takes)
     the default energy then samples where the error is: :data:`AREA_MAP_ROUNDS` rounds each
@@ -490,9 +502,13 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
         uv = area_aware_map(mesh, levels=5)
         semi = jp.remesh(mesh, uv, levels=5)      # the same as jp.remesh(mesh, levels=5)
     """
+    default = isinstance(energy, str) and energy == "density_stretch"
+    if (default and max_iters is None and weights == "shape_preserving" and mesh.n_faces >
+            AREA_MAP_FULL_FACES and np.all(mesh.topology.referenced)
+            and concrete_values(mesh.vertices) is not None):
+        return reweighted_stretch_map(mesh)       # no Newton: one Cholesky per round
     iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
     start = convex_map(mesh, weights=weights, boundary="circle")
-    default = isinstance(energy, str) and energy == "density_stretch"
     if default and not isinstance(mesh.vertices, jax.core.Tracer):
         V = np.asarray(mesh.vertices, np.float64)
         area = np.asarray(geometry.face_areas(V, mesh.faces))
@@ -538,8 +554,8 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
       :func:`jaxparam.convex_map`; a convex boundary such as ``"circle"`` or ``"square"``
       guarantees the base domain fits); by default (``None``) the area-aware map of
       :func:`area_aware_map` (circle boundary, L2 stretch minimized flip-free; up to 40k
-      faces reweighted where this level's remesh is far from the input), which samples
-      the surface by area instead of squeezing its far parts;
+      faces reweighted where this level's remesh is far from the input; above, reweighted
+      convex maps), which samples the surface by area instead of squeezing its far parts;
     - ``levels`` the number of dyadic refinements;
     - ``base_faces`` the number of base triangles: the fan's corners, evenly spaced by arc
       length along the boundary from its first vertex (the same name as
