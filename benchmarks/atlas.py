@@ -13,7 +13,9 @@ faces, UVs):
 - max s1/s2; covered: UV area over the unit square's; mirrored: charts (and their faces)
   whose signed UV area is negative; flips: faces of negative signed UV area inside charts
   of positive total area; overlaps: boundary edges of two charts that cross, plus charts
-  lying inside another (:func:`chart_overlaps`, no use of the packer); seconds: wall time (compilation included for jaxparam); load: the 1-minute load average
+  lying inside another (:func:`chart_overlaps`, no use of the packer); border: the least
+  distance of a UV to the unit square's border, in texels of a 1024 texture (jaxparam
+  keeps ``margin_texels`` = 2 there since session 9); seconds: wall time (compilation included for jaxparam); load: the 1-minute load average
   after the run.
 
 Usage::
@@ -23,6 +25,7 @@ Usage::
     python benchmarks/atlas.py --big                 # also the ~1M-face refined cow
     python benchmarks/atlas.py --no-xatlas ...       # jaxparam only
     python benchmarks/atlas.py --big --xatlas-cap 600  # stop xatlas after 600 s
+    python benchmarks/atlas.py --compact 0 ...        # jaxparam without the chart cuts
 
 xatlas is a benchmark-only extra (``pip install xatlas``); the engine never imports it.
 """
@@ -89,7 +92,8 @@ def measure(V, F, uv, T) -> dict:
     return {"charts": k, "seam": seam / np.sqrt(a3.sum()), "E_sd": float(np.sum(sd * a3) / a3.sum()),
             "max_aspect": float(np.max(aspect)), "covered": float(np.abs(auv).sum()),
             "mirrored": int(mirrored.sum()), "mirrored_faces": int(np.sum(mirrored[lab])),
-            "flips": flips, "overlaps": chart_overlaps(uv, T, lab)}
+            "flips": flips, "overlaps": chart_overlaps(uv, T, lab),
+            "border": 1024 * float(min(uv[T].min(), 1 - uv[T].max()))}
 
 
 def chart_overlaps(uv, T, lab) -> int:
@@ -145,11 +149,11 @@ def chart_overlaps(uv, T, lab) -> int:
     return crossings + inside
 
 
-def run_jaxparam(mesh) -> dict:
+def run_jaxparam(mesh, **kw) -> dict:
     from jaxparam.atlas import atlas
 
     t0 = time.perf_counter()
-    a = atlas(mesh)
+    a = atlas(mesh, **kw)
     dt = time.perf_counter() - t0
     r = measure(np.asarray(mesh.vertices, np.float64), mesh.faces, a.uv, a.uv_faces)
     r["seconds"] = dt
@@ -196,6 +200,8 @@ def main(argv=None) -> None:
     ap.add_argument("--no-xatlas", action="store_true")
     ap.add_argument("--xatlas-cap", type=float, default=900.0,
                     help="seconds after which xatlas is stopped (it can take hours at 1M faces)")
+    ap.add_argument("--compact", type=float, default=None,
+                    help="jp.atlas's compact (default: the library's)")
     ap.add_argument("--xatlas-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.xatlas_child:
@@ -208,15 +214,16 @@ def main(argv=None) -> None:
     if args.big:
         cases.append(("cow x256 (refined)", lambda: jp.shapes.refine(jp.load(DATA / "cow.off"), 4)))
     print("| mesh | faces | tool | charts | seam/sqrt(A) | E_sd (iso 2) | max s1/s2 | covered | "
-          "mirrored charts (faces) | flips | overlaps | seconds | load |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "mirrored charts (faces) | flips | overlaps | border (texels) | seconds | load |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    kw = {} if args.compact is None else {"compact": args.compact}
     for name, make in cases:
         try:
             mesh = make()
         except Exception as exc:       # e.g. a non-manifold file: the library refuses it
             print(f"| {name} | | | not loaded: {type(exc).__name__}: {str(exc)[:120]} |", flush=True)
             continue
-        tools = [("jaxparam", run_jaxparam)] + ([] if args.no_xatlas else [
+        tools = [("jaxparam", lambda m: run_jaxparam(m, **kw))] + ([] if args.no_xatlas else [
             ("xatlas", lambda m: run_xatlas(m, args.xatlas_cap))])
         for tool, fn in tools:
             try:
@@ -226,11 +233,12 @@ def main(argv=None) -> None:
                 continue
             if "capped" in r:
                 print(f"| {name} | {mesh.n_faces:,} | {tool} | stopped after {r['capped']:.0f} s "
-                      f"| | | | | | | | > cap | {os.getloadavg()[0]:.1f} |", flush=True)
+                      f"| | | | | | | | | > cap | {os.getloadavg()[0]:.1f} |", flush=True)
                 continue
             print(f"| {name} | {mesh.n_faces:,} | {tool} | {r['charts']} | {r['seam']:.2f} | "
                   f"{r['E_sd']:.4f} | {r['max_aspect']:.2f} | {100 * r['covered']:.1f} % | "
-                  f"{r['mirrored']} ({r['mirrored_faces']}) | {r['flips']} | {r['overlaps']} | {r['seconds']:.1f} | "
+                  f"{r['mirrored']} ({r['mirrored_faces']}) | {r['flips']} | {r['overlaps']} | "
+                  f"{r['border']:.1f} | {r['seconds']:.1f} | "
                   f"{os.getloadavg()[0]:.1f} |", flush=True)
 
 

@@ -10,20 +10,23 @@ first, each at the free position that keeps the bounding square of the charts pl
 far smallest (then the smallest bounding rectangle, then the lowest, then the leftmost),
 over its four proper turns (0, 90, 180, 270 degrees).  The occupancy holds every placed
 chart dilated by the margin.  Inside the current bounding rectangle, free positions are
-sifted with a few of the mask's boundary cells and checked with all of them, then with
-the whole mask (:func:`_inside`); when none is free there, all positions are tested at
-once by an FFT correlation of the mask with the occupancy (:func:`_anywhere`).  The bounding square (side ``S`` cells) is then scaled onto
-``[0, 1]^2``: a cell becomes ``texture_size / S >= f`` texels, so two charts stay at
-least ``margin_texels`` texels apart.  The scale (UV units per 3D unit, one for all
-charts, so texel density is uniform) starts from the charts' area and is corrected from
-each packing's side, so that ``S`` comes close to (and not above) the raster's size: a
+sifted with a few of the mask's boundary cells and checked with all of them, then with the
+whole mask (:func:`_inside`); when none is free there, all positions are tested at once by
+an FFT correlation of the mask with the occupancy (:func:`_anywhere`).  The bounding
+square (side ``S`` cells), framed by ``m = ceil(margin_texels / f)`` free cells on each
+side, is then scaled onto ``[0, 1]^2``: a cell becomes ``texture_size / (S + 2 m) >= f``
+texels, so two charts stay at least ``margin_texels`` texels apart, and every chart at
+least ``margin_texels`` texels from the square's border (for bilinear filtering and
+mip-maps at the texture's edge).  The scale (UV units per 3D unit, one for all charts, so
+texel density is uniform) starts from the charts' area and is corrected from each
+packing's side, so that ``S + 2 m`` comes close to (and not above) the raster's size: a
 few packings in all.  A short bisection on the scale then packs into the fixed square of
-the raster's size (:func:`fill_square`: largest first, each chart at its lowest, then
-leftmost free position over its four turns) at scales up to 12 % more area, and keeps the
-largest scale that fits: bottom-left filling of a fixed square nests the last charts into
-the gaps the growing square leaves (session 8, on the same charts: 3holes 59.6 -> 61.9 %,
-rocker-arm 60.8 -> 63.0 %, decimated-knight 64.8 -> 65.8 %, bunny 65.1 -> 66.0 %, cow and
-halftunnel unchanged).
+the raster's size less the frame (:func:`fill_square`: largest first, each chart at its
+lowest, then leftmost free position over its four turns) at scales up to 12 % more area,
+and keeps the largest scale that fits: bottom-left filling of a fixed square nests the
+last charts into the gaps the growing square leaves (session 8, on the same charts: 3holes
+59.6 -> 61.9 %, rocker-arm 60.8 -> 63.0 %, decimated-knight 64.8 -> 65.8 %, bunny 65.1 ->
+66.0 %, cow and halftunnel unchanged).
 """
 from __future__ import annotations
 
@@ -33,7 +36,8 @@ import numpy as np
 
 from ..errors import SolverError
 
-__all__ = ["Packing", "min_area_rotation", "rasterize", "pack_charts", "place_square", "fill_square"]
+__all__ = ["Packing", "min_area_rotation", "min_square_rotation", "rasterize", "pack_charts",
+           "place_square", "fill_square"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +90,23 @@ def min_area_rotation(P: np.ndarray) -> np.ndarray:
     if ext[best, 1] > ext[best, 0]:
         Rb = np.array([[0.0, 1.0], [-1.0, 0.0]]) @ Rb
     return Rb
+
+
+def min_square_rotation(P: np.ndarray, steps: int = 720) -> np.ndarray:
+    """The proper rotation ``(2, 2)`` that makes the bounding square of the points ``P (k, 2)``
+    smallest (its side ``max(width, height)``; angles in steps of ``90 / steps`` degrees and
+    the convex hull's edge directions): the turn for an atlas of one chart, which fills the
+    square alone (snail: 49.6 -> 63.1 % bound at the min-area rectangle's turn)."""
+    H = _hull(P)
+    if len(H) < 3:
+        return np.eye(2)
+    e = np.roll(H, -1, axis=0) - H
+    th = np.r_[np.linspace(0.0, np.pi / 2, steps, endpoint=False), -np.arctan2(e[:, 1], e[:, 0])]
+    c, s = np.cos(th), np.sin(th)
+    R = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)       # (t, 2, 2)
+    Q = np.einsum("tij,kj->tki", R, H)
+    ext = Q.max(1) - Q.min(1)
+    return R[int(np.argmin(ext.max(1)))]
 
 
 def rasterize(S: np.ndarray, shape) -> np.ndarray:
@@ -364,7 +385,8 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
 
     **Arguments:** ``uv_faces (m, 3)``, ``chart (m,)`` face charts, ``uv_chart (n_uv,)``,
     ``area3d`` (total UV area of the charts at their own scale); ``texture_size`` (texels a
-    side), ``margin_texels``; ``fill``: the share of the raster the first scale expects
+    side), ``margin_texels`` (the least gap between two charts, and between a chart and the
+    square's border); ``fill``: the share of the raster the first scale expects
     to cover; ``max_attempts``: packings tried at most; ``refine_steps``: bisection steps
     of :func:`fill_square` on the scale, between the growing-square packing's and
     ``refine_gain`` times its covered area (0: none).
@@ -382,7 +404,7 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     local = np.zeros_like(uv)
     for c in range(k):
         ids = order[bounds[c]:bounds[c + 1]]
-        R = min_area_rotation(uv[ids])
+        R = min_area_rotation(uv[ids]) if k > 1 else min_square_rotation(uv[ids])
         Q = uv[ids] @ R.T
         rot[c], origin[c] = R, np.linalg.solve(R, Q.min(0))
         local[ids] = Q - Q.min(0)
@@ -392,8 +414,14 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     while texture_size // (2 * f) >= 512 and texture_size % (2 * f) == 0:
         f *= 2
     size, m = texture_size // f, int(np.ceil(margin_texels / f))
-    cap = int(np.ceil(1.3 * size))
-    s = size * np.sqrt(fill / area3d)            # cells per 3D unit
+    # the charts go into the inner square: m cells of margin at each side of [0, 1]^2 too
+    inner = size - 2 * m
+    if inner < 1:
+        raise SolverError(f"pack_charts: a margin of {margin_texels} texels leaves no room in a "
+                          f"{texture_size}-texel texture; lower margin_texels or raise texture_size.",
+                          stage="pack")
+    cap = int(np.ceil(1.3 * inner))
+    s = inner * np.sqrt(fill / area3d)           # cells per 3D unit
     best = None
     attempt = 0
     while attempt < max_attempts:
@@ -404,11 +432,11 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
             s *= 0.8
             continue
         side = placed[2]
-        if side <= size and (best is None or s / side > best[0]):
-            best = (s / side, s, masks, placed)
-        if 0.97 * size <= side <= size:
+        if side <= inner and (best is None or s / (side + 2 * m) > best[0]):
+            best = (s / (side + 2 * m), s, masks, placed)
+        if 0.97 * inner <= side <= inner:
             break
-        s *= size / side * (0.995 if side > size else 1.0)
+        s *= inner / side * (0.995 if side > inner else 1.0)
     if best is None:
         raise SolverError(f"pack_charts: the {k} charts did not fit into the unit square after "
                           f"{attempt} packings; lower margin_texels or raise texture_size.",
@@ -418,7 +446,7 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     for _ in range(int(refine_steps)):
         s = 0.5 * (lo + hi)
         masks = _chart_masks(local, seg, seg_of, s)
-        placed = fill_square(masks, size, m)
+        placed = fill_square(masks, inner, m)
         attempt += 1
         if placed is None:
             hi = s
@@ -430,5 +458,5 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     for c in range(k):
         _, Rt, tr = _turns(masks[c])[turn[c]]
         rot[c] = Rt @ rot[c]
-        offset[c] = (pos[c] + np.asarray(tr, float)) / side
+        offset[c] = (pos[c] + m + np.asarray(tr, float)) / (side + 2 * m)
     return Packing(rot, origin, offset, float(scale), texture_size, margin_texels, attempt)

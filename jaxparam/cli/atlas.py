@@ -29,9 +29,12 @@ def add_atlas_parser(sub, command) -> None:
     p = command(sub, "atlas", "a UV atlas (charts, flip-free maps, packing) of any mesh: "
                 "closed or open, any genus, several components", cmd_atlas)
     add_mirrored(p, "--texture-size", atlas, "texture_size", "texels a side of the texture")
-    add_mirrored(p, "--margin-texels", atlas, "margin_texels", "least gap between charts, in texels")
+    add_mirrored(p, "--margin-texels", atlas, "margin_texels", "least gap between charts, and "
+                 "between a chart and the texture's border, in texels")
     add_mirrored(p, "--cone", atlas, "cone", "largest angle (degrees) between a face normal and "
                  "its chart's mean normal", type=float)
+    add_mirrored(p, "--compact", atlas, "compact", "most new charts, as a share of the charts, "
+                 "from cutting concave charts so they pack tighter (0: none)", type=float)
     add_named(p, "--energy", sorted(ENERGIES), default_of(atlas, "energy"),
               "distortion energy each chart's map minimizes")
 
@@ -78,7 +81,7 @@ def cmd_atlas(args) -> int:
     mesh = load(args.mesh)
     clock("load")
     a = atlas(mesh, energy=canonical(args.energy), texture_size=args.texture_size,
-              margin_texels=args.margin_texels, cone=args.cone)
+              margin_texels=args.margin_texels, cone=args.cone, compact=args.compact)
     clock("atlas")
     written = []
     try:
