@@ -325,7 +325,11 @@ def test_minimize(meshes, name, solver, free):
 #: 1.7e-15 relative; and Newton's own gradient against finite differences
 #: (``regular-newton-True`` in this grid: at most 1.1e-9 at h = 3e-6 along the same three
 #: directions).
-FORWARD_NOISY = {("regular", "jaxopt_lbfgs", True)}
+#: The same holds for our own L-BFGS there since the Newton Hessian's pull-back is written out
+#: entry by entry (issue 17, session 9: rounding-level changes in the polishing steps): its
+#: difference quotient is off by 2.4e-3 at h = 3e-6, while its gradient agrees with Newton's
+#: to 1e-10 and Newton's with finite differences (both checked here).
+FORWARD_NOISY = {("regular", "jaxopt_lbfgs", True), ("regular", "lbfgs", True)}
 
 
 def _minimize_against_newton(meshes, name, solver, free):
