@@ -239,8 +239,7 @@ def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary:
     Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
     w = wts.fan_weights(Pj, E, weights)
     uv_b = _boundary_map(Pj, jax.device_put(bnd), boundary=boundary, spacing=spacing)
-    vals, rhs = comb.assemble(system, w, uv_b, normalize=comb.normalizes(weights))
-    x = comb.solve(system, vals, rhs, symmetric=symmetric)
+    x = comb.solve_weights(system, w, uv_b, normalize=comb.normalizes(weights), symmetric=symmetric)
     return comb.scatter(x, uv_b, jax.device_put(E.free), jax.device_put(bnd), n=N)
 
 
