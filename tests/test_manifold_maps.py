@@ -292,17 +292,18 @@ def _icosphere_arrays():
 
 
 def test_relaxed_samples_are_dropped_when_they_stretch_the_remesh():
-    # _unless_stretched keeps the relaxed samples unless the longest remesh edge grows past
-    # RELAX_MAX_EDGE_GROWTH; a fake lift (the samples' region index as a position) shows both.
-    from jaxparam.manifold.parameterization import RELAX_MAX_EDGE_GROWTH, _unless_stretched
+    # _stretches (the remesh's guard) drops the relaxed samples when the longest remesh edge
+    # grows past RELAX_MAX_EDGE_GROWTH; a fake lift (the samples' region index as a position)
+    # shows both.
+    from jaxparam.manifold.parameterization import RELAX_MAX_EDGE_GROWTH, _stretches
 
     faces = np.array([[0, 1, 2]])
     lift = lambda r, b: np.c_[r, np.zeros((r.size, 2))].astype(float)  # noqa: E731
     r0, b0 = np.array([0, 1, 2]), np.zeros((3, 3))
     grown = np.array([0, 1, 2 * RELAX_MAX_EDGE_GROWTH + 0.1])
     kept = np.array([0, 1, 2 * RELAX_MAX_EDGE_GROWTH - 0.1])
-    assert _unless_stretched(grown, b0 + 1, r0, b0, lift, faces)[0] is r0
-    assert _unless_stretched(kept, b0 + 1, r0, b0, lift, faces)[0] is kept
+    assert _stretches(lift(grown, b0 + 1), lift(r0, b0), faces)
+    assert not _stretches(lift(kept, b0 + 1), lift(r0, b0), faces)
 
 
 @pytest.mark.slow
