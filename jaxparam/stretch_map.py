@@ -196,6 +196,5 @@ def reweighted_stretch_map(mesh: TriMesh, *, face_weights=None, iters: int = STR
 def _traced_map(t, w, uv_b):
     """The full ``(n, 2)`` UVs of the convex map with entry weights ``w`` (JAX)."""
     S = linear.interior_system(t)
-    vals, rhs = comb.assemble(S, w, uv_b, normalize=False)
-    x = comb.solve(S, vals, rhs, symmetric=True)
+    x = comb.solve_weights(S, w, uv_b, normalize=False, symmetric=True)
     return comb.scatter(x, uv_b, t.interior, t.boundary, n=t.n_vertices)
