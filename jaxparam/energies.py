@@ -315,9 +315,10 @@ def _face_terms(form, V, F, Q, params):
     """
     P = V[F]
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    g11, g12, g22 = jnp.sum(e1 * e1, -1), jnp.sum(e1 * e2, -1), jnp.sum(e2 * e2, -1)
+    g11, g12, g22 = geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)
     l1, il1 = _root(g11)
-    nn, inn = _root(jnp.sum(jnp.cross(e1, e2) ** 2, -1))
+    cr = jnp.cross(e1, e2)
+    nn, inn = _root(geo.dot(cr, cr))
     x2, y2 = g12 * il1, nn * il1
     u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
     idet = 1.0 / (l1 * y2)

@@ -31,7 +31,7 @@ import numpy as np
 from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from .options import choose
 from .errors import MeshError
-from .geometry import safe_norm
+from .geometry import dot as geo_dot, safe_norm
 from . import host as _host
 
 __all__ = [
@@ -105,7 +105,7 @@ def _corner_geometry(V, F):
     e = jnp.roll(P, -1, axis=1) - P                     # half-edge c -> c+1
     f = jnp.roll(P, 1, axis=1) - P                      # c -> c-1
     cr = safe_norm(jnp.cross(e, f))
-    dot = jnp.sum(e * f, -1)
+    dot = geo_dot(e, f)
     return (jnp.arctan2(cr, dot).reshape(-1), (dot / cr).reshape(-1),
             safe_norm(e).reshape(-1))
 
@@ -493,7 +493,7 @@ def _fan_kernel(P, center, nbr, nxt, prv, row, row_start, row_end, degree, *, ki
     # antiparallel (pi); see fan_weights.
     d = P[nbr] - P[center]
     b = d.at[nxt].get(unique_indices=True)
-    angle = jnp.arctan2(safe_norm(jnp.cross(d, b)), jnp.sum(d * b, -1))
+    angle = jnp.arctan2(safe_norm(jnp.cross(d, b)), geo_dot(d, b))
     return weights_from_angles(kind, angle, angle.at[prv].get(unique_indices=True), safe_norm(d),
                                row, row_start, row_end, degree, n_rows=n_rows,
                                max_degree=max_degree)
