@@ -448,12 +448,15 @@ def test_fan_weights_match_the_four_gather_formula(meshes, name, weights):
 
 
 def test_hand_written_weight_derivatives_match_jax_own():
-    """The custom_jvp pieces of the weights (issue 12: the mean-value formula and the polar map
-    of the shape-preserving weights, whose tangents reuse the primal's tan / cos, sin) against
-    JAX's derivative of the plain formulas: values bitwise, reverse and forward derivatives to
-    1e-12 relative per entry (measured at most 8e-14, where a polar tangent cancels), on random
-    angles and at the degenerate ones (0, and pi where tan(pi/2) is about 1.6e16: finite
-    coefficients either way)."""
+    """The custom_jvp pieces of the weights (issue 12: the mean-value formula, whose tangent
+    reuses the primal's tan, and Floater's shape-preserving weights, whose tangent is written
+    out from the forward's polar points, edges and areas) against JAX's derivative of the plain
+    formulas: values bitwise, reverse and forward derivatives to 1e-12 relative per entry, on
+    random angles and at the degenerate ones (mean value: 0, and pi where tan(pi/2) is about
+    1.6e16: finite coefficients either way; shape-preserving: a fan with an angle of pi or
+    more, where the centre lies on an edge from p_k, and a zero angle)."""
+    import functools
+
     from jaxparam import weights as wts
 
     rng = np.random.default_rng(5)
@@ -462,9 +465,25 @@ def test_hand_written_weight_derivatives_match_jax_own():
     prev = jnp.asarray(rng.permutation(np.asarray(angle)))
     r = jnp.asarray(rng.uniform(0.1, 2.0, k))
     plain_mv = lambda a, p, l: (jnp.tan(0.5 * p) + jnp.tan(0.5 * a)) / l     # noqa: E731
-    plain_polar = lambda l, f: l[:, None] * jnp.stack([jnp.cos(f), jnp.sin(f)], -1)  # noqa: E731
+
+    # point fans of degrees 3..12; row 0 has an angle above pi, row 1 a zero angle
+    degree = rng.integers(3, 13, 40)
+    row = np.repeat(np.arange(degree.size), degree)
+    starts = np.concatenate([[0], np.cumsum(degree)])
+    row_start, row_end = starts[row], starts[row + 1]
+    delta = rng.uniform(0.2, 1.0, row.size)
+    delta[:starts[1]] = 0.3
+    delta[0] = 3.6          # above pi once scaled by 2 pi / sum: p lies on an edge from p_k
+    delta[starts[1] + 1] = 0.0
+    lengths = rng.uniform(0.1, 2.0, row.size)
+    ints = (row, row_start, row_end, degree)
+    sizes = dict(n_rows=int(degree.size), max_degree=wts.loop_bound(int(degree.max())))
+    new_sp = lambda d, l: wts.shape_preserving_weights(d, l, *ints, **sizes)       # noqa: E731
+    plain_sp = lambda d, l: functools.partial(wts._shape_preserving_primal, **sizes)(  # noqa: E731
+        d, l, *ints)
+
     for new, ref, args in ((wts._mean_value, plain_mv, (angle, prev, r)),
-                           (wts._polar, plain_polar, (r, 2 * angle))):
+                           (new_sp, plain_sp, (jnp.asarray(delta), jnp.asarray(lengths)))):
         out, vjp_new = jax.vjp(new, *args)
         out_ref, vjp_ref = jax.vjp(ref, *args)
         assert np.array_equal(np.asarray(out), np.asarray(out_ref))
@@ -479,6 +498,49 @@ def test_hand_written_weight_derivatives_match_jax_own():
             # entries that cancel to far below their terms
             floor = 1e-3 * np.median(np.abs(b))
             assert np.max(np.abs(a - b) / np.maximum(np.abs(b), floor)) <= 1e-12
+
+
+def test_fan_angle_derivative_matches_jax_own():
+    """The fan angles' hand-written tangent (``weights._fan_angles``, issue 12) against JAX's
+    derivative of the plain formula ``atan2(|u x v|, u.v)``, ``|u|``: values to rounding,
+    reverse and forward derivatives to 1e-12 relative per entry, on random fans with two
+    degenerate pairs, one neighbour on the ray of the previous one (angle 0) and one on the
+    opposite ray (angle pi), where both take the mean of the one-sided derivatives (0 for the
+    angle)."""
+    from jaxparam import weights as wts
+    from jaxparam.geometry import safe_norm
+
+    rng = np.random.default_rng(8)
+    degree = rng.integers(3, 9, 30)
+    row = np.repeat(np.arange(degree.size), degree)
+    starts = np.concatenate([[0], np.cumsum(degree)])
+    e = np.arange(row.size)
+    nxt = np.where(e + 1 < starts[row + 1], e + 1, starts[row])
+    d = rng.standard_normal((row.size, 3))
+    d[1] = 2.0 * d[0]                  # same ray: |u x v| = 0 (or rounding)
+    d[4] = -2.0 * d[3]                 # opposite rays
+    d = jnp.asarray(d)
+
+    def plain(d, nxt):
+        b = d[nxt]
+        return jnp.arctan2(safe_norm(jnp.cross(d, b)), jnp.sum(d * b, -1)), safe_norm(d)
+
+    new = lambda d: wts._fan_angles(d, nxt)      # noqa: E731
+    ref = lambda d: plain(d, nxt)                # noqa: E731
+    out, vjp_new = jax.vjp(new, d)
+    out_ref, vjp_ref = jax.vjp(ref, d)
+    for a, b in zip(out, out_ref):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-15, atol=1e-15)
+    assert abs(float(out[0][0])) < 1e-15 and float(out[0][3]) == pytest.approx(np.pi)
+    cts = tuple(jnp.asarray(rng.standard_normal(o.shape)) for o in out)
+    tan_in = jnp.asarray(rng.standard_normal(d.shape))
+    pairs = [(vjp_new(cts)[0], vjp_ref(cts)[0])]
+    pairs += list(zip(jax.jvp(new, (d,), (tan_in,))[1], jax.jvp(ref, (d,), (tan_in,))[1]))
+    for a, b in pairs:
+        a, b = np.asarray(a), np.asarray(b)
+        assert np.all(np.isfinite(b)) and np.max(np.abs(b)) > 0
+        floor = 1e-3 * np.median(np.abs(b))
+        assert np.max(np.abs(a - b) / np.maximum(np.abs(b), floor)) <= 1e-12
 
 
 # ---------------------------------------------------------------------------------------------
