@@ -632,8 +632,19 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
         raise MeshError("remesh: the UVs are traced without a value (inside jax.jit or jax.vmap); "
                         "remesh locates the sample points on the host from the UVs' values: call "
                         "it outside jax.jit (jax.grad and jax.jvp are fine), or pass concrete UVs.")
-    if U.shape != (mesh.n_vertices, 2) or not np.all(np.isfinite(U)):
-        raise MeshError(f"remesh: uv must be a finite ({mesh.n_vertices}, 2) array, got shape {U.shape}.")
+    if U.shape != (mesh.n_vertices, 2):
+        raise MeshError(f"remesh: uv must be a finite ({mesh.n_vertices}, 2) array (one UV per vertex), "
+                        f"got shape {U.shape}.")
+    # Vertices in no face carry no UV (jp.convex_map gives them nan): only the used ones count.
+    used = np.zeros(mesh.n_vertices, bool)
+    used[np.asarray(mesh.faces).ravel()] = True
+    nonfinite = np.flatnonzero(used & ~np.all(np.isfinite(U), axis=1))
+    if nonfinite.size:
+        raise MeshError(f"remesh: uv is not finite at vertices {first_few(nonfinite)} (vertex "
+                        f"{int(nonfinite[0])} has {tuple(U[nonfinite[0]])}); pass finite UVs for "
+                        "every vertex of a face.")
+    if not used.all():
+        U = np.where(used[:, None], U, U[used][0])
     flipped = np.flatnonzero(signed_area2(U, mesh.faces) <= 0)
     if flipped.size:
         raise MeshError(f"remesh: the parameterization is not one-to-one: faces {first_few(flipped)} "

@@ -240,3 +240,21 @@ def test_subdivision_numbering_contract():
     # Corner values carried to the children agree with the vertices' midpoints.
     C = split_corner_values(U[F])
     np.testing.assert_array_equal(C, V1[F1])
+
+
+def test_unreferenced_vertices_do_not_block_a_remesh():
+    # Found in QA on a scan with stray vertices: convex_map gives them nan, and remesh refused
+    # the whole mesh ("uv must be a finite (n, 2) array, got shape (n, 2)").
+    mesh = jp.shapes.graph_surface(8)
+    V = np.vstack([mesh.vertices, [[5.0, 5.0, 5.0], [6.0, 5.0, 5.0]]])
+    stray = jp.TriMesh(V, mesh.faces)
+    plain = jp.remesh(mesh, levels=2)
+    semi = jp.remesh(stray, levels=2)
+    assert np.all(np.isfinite(np.asarray(semi.mesh.vertices)))
+    np.testing.assert_allclose(np.asarray(semi.mesh.vertices), np.asarray(plain.mesh.vertices),
+                               atol=1e-10)
+    uv = np.asarray(jp.convex_map(mesh))
+    bad = np.vstack([uv, [[np.nan, 0.0], [0.0, 0.0]]])
+    bad[3] = np.nan                                   # a vertex of a face: named in the error
+    with pytest.raises(MeshError, match="not finite at vertices 3"):
+        jp.remesh(stray, bad, levels=1)
