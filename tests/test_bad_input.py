@@ -209,3 +209,15 @@ def test_cli_exit_3_for_an_unwritable_output_and_for_points(tmp_path, capsys):
     assert main(["meshless", str(pts), "-o", str(tmp_path / "m.obj")]) == 3
     assert "too few" in capsys.readouterr().err
     assert not (tmp_path / "m.obj").exists()
+
+
+@pytest.mark.parametrize("content", ["", "# a scan header only\n\n"])
+def test_cli_meshless_names_a_point_file_with_no_points(tmp_path, capsys, content):
+    # Found in QA: an empty .xyz gave a raw numpy ValueError ("zero-size array to reduction").
+    pts = tmp_path / "empty.xyz"
+    pts.write_text(content)
+    with pytest.raises(MeshFileError, match="holds no points"):
+        jp.load_points(pts)
+    assert main(["meshless", str(pts), "-o", str(tmp_path / "m.obj")]) == 3
+    assert "holds no points" in capsys.readouterr().err
+

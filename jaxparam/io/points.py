@@ -58,4 +58,7 @@ def _read_xyz(p, path) -> np.ndarray:
             rows.append([float(t) for t in parts[:3]])
         except ValueError:
             raise MeshFileError(f"{path}, line {line_no}: cannot read numbers from {line!r}.") from None
+    if not rows:
+        raise MeshFileError(f"{path}: the file holds no points (no 'x y z' lines); is it the "
+                            "right file?")
     return np.asarray(rows, np.float64).reshape(-1, 3)
