@@ -220,4 +220,15 @@ def test_cli_meshless_names_a_point_file_with_no_points(tmp_path, capsys, conten
         jp.load_points(pts)
     assert main(["meshless", str(pts), "-o", str(tmp_path / "m.obj")]) == 3
     assert "holds no points" in capsys.readouterr().err
+    with pytest.raises(jp.errors.PointCloudError, match="0 points are too few"):
+        jp.meshless_map(np.zeros((0, 3)))
 
+
+@pytest.mark.parametrize("k", [0, -1, 2.5])
+def test_meshless_k_must_be_a_positive_integer(k):
+    # Found in QA: --k 0 raised ZeroDivisionError, k=-1 a scipy ValueError, k=2.5 a TypeError.
+    P = jp.shapes.graph_surface(6).vertices
+    with pytest.raises(jp.errors.PointCloudError, match=r"k \(neighbours per point\) must be a positive integer"):
+        jp.meshless_map(P, k=k)
+    with pytest.raises(jp.errors.PointCloudError, match="must be a positive integer"):
+        jp.reconstruct_surface(P, k=k)

@@ -43,6 +43,11 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
     P = np.asarray(points, np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise PointCloudError(f"meshless_map: points must have shape (N, 3), got {P.shape}.")
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise PointCloudError(f"meshless_map: k (neighbours per point) must be a positive "
+                              f"integer, got {k!r}; the default is {K}.")
+    if P.shape[0] < 4:      # before any reduction over the points (an empty set has no bounds)
+        raise PointCloudError(f"meshless_map: {P.shape[0]} points are too few; at least 4 are needed.")
     bad = np.flatnonzero(~np.all(np.isfinite(P), axis=1))
     if bad.size:
         raise PointCloudError(f"meshless_map: points {first_few(bad)} have non-finite coordinates; "
