@@ -71,6 +71,14 @@ def test_console_script_runs(mesh_file, tmp_path):
     assert r.returncode == 0 and "genus" in r.stdout
 
 
+def test_python_dash_m_jaxparam_runs_the_command(mesh_file):
+    # Found in QA: "python -m jaxparam info ..." said "'jaxparam' is a package and cannot be
+    # directly executed"; only "python -m jaxparam.cli" worked.
+    r = subprocess.run([sys.executable, "-m", "jaxparam", "info", str(mesh_file)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and "genus" in r.stdout
+
+
 # -- one vocabulary: both spellings, the API's defaults ------------------------------------
 
 def parse(*argv):
