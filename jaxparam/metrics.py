@@ -161,7 +161,9 @@ def theorem1(mesh, uv, *, weights=None) -> Theorem1:
     convex = bmap.is_convex_polygon(P)
     pos = None
     neg = 0
-    if weights is not None:
+    if weights is not None and t.interior.size == 0:
+        pos = True      # no interior vertex, no weight: the map is the boundary map itself
+    elif weights is not None:
         if isinstance(weights, str):
             # The sign check needs no compilation: the weights in NumPy (jaxparam.host).
             w, _ = wts.entry_weights(mesh.vertices, t, weights, host=True)

@@ -298,3 +298,16 @@ def test_flatten_repeats_the_minimize_defaults_that_its_parser_shows():
     args = __import__("jaxparam.cli", fromlist=["build_parser"]).build_parser("flatten").parse_args(
         ["flatten", "m.off", "-o", "x.obj"])
     assert (args.solver, args.max_iters, args.energy) == ("newton", 200, None)
+
+
+def test_flatten_a_strip_with_no_interior_vertex(tmp_path, capsys):
+    # Found in QA: a 8 x 2 grid (every vertex on the boundary) failed with exit 3, "weights:
+    # the mesh has no interior vertices", raised by the report's Theorem 1 check, although
+    # the map itself (the boundary map) is fine.
+    p = tmp_path / "strip.obj"
+    jp.save(p, jp.shapes.plane_grid(8, 2))
+    out, rep = tmp_path / "s.obj", tmp_path / "s.json"
+    assert main(["flatten", str(p), "-o", str(out), "--report", str(rep)]) == 0
+    r = json.loads(rep.read_text())
+    assert r["flips"] == 0 and r["theorem1"]["holds"] is True
+    assert jp.load(out).uv.shape == (16, 2)
