@@ -300,6 +300,19 @@ def test_flatten_repeats_the_minimize_defaults_that_its_parser_shows():
     assert (args.solver, args.max_iters, args.energy) == ("newton", 200, None)
 
 
+def test_flatten_warns_when_the_map_has_flat_or_flipped_faces(tmp_path, capsys):
+    # Found in QA (snail refined, --boundary square): two faces whose dividing edges land on
+    # one side of the square were written with zero area, exit 0 and nothing on stderr.
+    p = tmp_path / "patch.obj"
+    jp.save(p, jp.shapes.cylinder_patch(12, 4))
+    assert main(["flatten", str(p), "-o", str(tmp_path / "sq.obj"), "--boundary", "square"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: 2 faces of the map are flipped or degenerate" in err
+    assert "dividing edges (2, 7), (40, 45)" in err and "--boundary circle" in err
+    assert main(["flatten", str(p), "-o", str(tmp_path / "c.obj")]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
 def test_flatten_a_strip_with_no_interior_vertex(tmp_path, capsys):
     # Found in QA: a 8 x 2 grid (every vertex on the boundary) failed with exit 3, "weights:
     # the mesh has no interior vertices", raised by the report's Theorem 1 check, although

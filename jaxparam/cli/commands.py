@@ -63,6 +63,25 @@ def warn_unconverged(command: str, rep: dict, name: str = "") -> bool:
     return True
 
 
+def warn_flips(command: str, rep: dict) -> bool:
+    """Print a warning on stderr when the report ``rep`` counts flipped or degenerate UV
+    triangles (``rep["flips"] > 0``), naming the dividing edges Theorem 1 blames; returns
+    whether it did."""
+    flips = rep.get("flips") or 0
+    if flips <= 0:
+        return False
+    why = ""
+    edges = (rep.get("theorem1") or {}).get("dividing_edges_on_boundary") or []
+    if edges:
+        named = ", ".join(f"({int(a)}, {int(b)})" for a, b in edges[:5])
+        why = (f": the dividing edges {named} (interior edges with both ends on the boundary) "
+               "lie on one straight side of the boundary polygon, so their faces are flat; use "
+               "--boundary circle, or split those edges")
+    print(f"jaxparam {command}: warning: {flips} faces of the map are flipped or degenerate (zero "
+          f"area) in the UVs{why}", file=sys.stderr)
+    return True
+
+
 def finish(args, mesh, uv, line: str, *, report: dict | None = None,
            plot: Callable | None = None, save_stage: str | None = None, texture=None) -> int:
     """Write the command's outputs, all or nothing, then print ``line``; returns ``EXIT_OK``.
@@ -127,6 +146,7 @@ def cmd_flatten(args) -> int:
     uv, rep = flatten_mesh(mesh, **flatten_options(args), say=lambda m: print(m, file=sys.stderr))
     rep["seconds"]["load"] = clock["load"]
     warn_unconverged("flatten", rep)
+    warn_flips("flatten", rep)
     texture = None
     if getattr(args, "checker_texture", False):
         if Path(args.output).suffix.lower() not in (".glb", ".gltf"):
