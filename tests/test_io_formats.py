@@ -355,3 +355,18 @@ def test_written_rows_equal_savetxt_digit_for_digit():
     np.savetxt(b, F, fmt="f %d/%d %d/%d %d/%d")
     assert a.getvalue() == b.getvalue()
     assert np.array_equal(np.loadtxt(pyio.StringIO(a.getvalue().replace("f ", "").replace("/", " "))), F)
+
+
+def test_obj_faces_may_refer_to_vertices_defined_further_down(tmp_path):
+    # Found in QA: an OBJ with its 'f' lines before its 'v' lines (libigl and trimesh read it)
+    # was refused ("index 1 refers to element 1 but only 0 are defined before this line").
+    p = tmp_path / "faces_first.obj"
+    p.write_text("f 1 2 3\nf 1 3 4\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n")
+    mesh = jp.load(p)
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and mesh.n_vertices == 4
+    p.write_text("f 1 2 5\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n")
+    with pytest.raises(MeshFileError, match=r"line 1: index 5 is out of range: the file defines only 4"):
+        jp.load(p)
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n")
+    with pytest.raises(MeshFileError, match=r"line 4: index 0 is not valid"):
+        jp.load(p)

@@ -38,7 +38,7 @@ def parse_obj(path):
     uv_faces (m, 3) or None, dropped)``; polygons split into triangle fans.  ``uv_faces`` are
     the faces' ``vt`` indices when every face has them; ``dropped`` counts faces without
     ``vt`` in a file that has some (their UVs cannot be kept)."""
-    verts, tex, faces, ftex = [], [], [], []
+    verts, tex, faces, ftex, face_lines = [], [], [], [], []
     text = read_text(path)
     for line_no, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
@@ -64,6 +64,7 @@ def parse_obj(path):
                     ti.append(_obj_index(fields[1], len(tex), path, line_no))
             for k in range(1, len(vi) - 1):
                 faces.append([vi[0], vi[k], vi[k + 1]])
+                face_lines.append(line_no)
                 ftex.append([ti[0], ti[k], ti[k + 1]] if len(ti) == len(vi) else None)
     if not verts:
         raise MeshFileError(f"{path}: no vertices ('v' lines) found; is this an OBJ mesh file?")
@@ -72,10 +73,26 @@ def parse_obj(path):
                             "(for bare points use jaxparam meshless).")
     V = np.asarray(verts, np.float64)
     F = np.asarray(faces, np.int64)
+    # Positive indices may refer to elements defined further down (as libigl and trimesh read
+    # them); only now is it known whether they exist.
+    _check_forward(F, len(verts), face_lines, path, "vertex")
     missing = sum(t is None for t in ftex)
     if not tex or missing:
         return V, F, None, None, missing if tex and missing < len(ftex) else 0
-    return V, F, np.asarray(tex, np.float64), np.asarray(ftex, np.int64), 0
+    T = np.asarray(ftex, np.int64)
+    _check_forward(T, len(tex), face_lines, path, "texture coordinate")
+    return V, F, np.asarray(tex, np.float64), T, 0
+
+
+def _check_forward(F, count: int, face_lines, path, what: str) -> None:
+    """A :class:`MeshFileError` naming the first face line whose index in ``F`` (0-based)
+    is at or past ``count``, the number of elements in the whole file."""
+    bad = np.flatnonzero(F.max(axis=1) >= count) if F.size else F
+    if bad.size:
+        i = int(bad[0])
+        raise MeshFileError(f"{path}, line {face_lines[i]}: index {int(F[i].max()) + 1} is out "
+                            f"of range: the file defines only {count} ({what} lines); the file "
+                            "is truncated or malformed.")
 
 
 def corner_to_vertex_uv(F, texcoords, uv_faces, n: int):
@@ -128,7 +145,10 @@ def _obj_index(tok: str, count: int, path, line_no: int) -> int:
         raise MeshFileError(f"{path}, line {line_no}: bad index {tok!r}; the file is malformed.") from None
     if i < 0:
         i = count + i + 1
-    if i < 1 or i > count:
-        raise MeshFileError(f"{path}, line {line_no}: index {tok} refers to element {i} but only "
-                            f"{count} are defined before this line.")
+        if i < 1:
+            raise MeshFileError(f"{path}, line {line_no}: relative index {tok} refers to element "
+                                f"{i} but only {count} are defined before this line.")
+    if i == 0:
+        raise MeshFileError(f"{path}, line {line_no}: index 0 is not valid (OBJ indices start "
+                            "at 1; negative ones count back from the last element defined).")
     return i - 1
