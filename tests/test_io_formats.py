@@ -370,3 +370,16 @@ def test_obj_faces_may_refer_to_vertices_defined_further_down(tmp_path):
     p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n")
     with pytest.raises(MeshFileError, match=r"line 4: index 0 is not valid"):
         jp.load(p)
+
+
+def test_a_utf8_byte_order_mark_is_not_part_of_the_first_line(tmp_path):
+    # Found in QA: an OBJ saved by a Windows editor (BOM first) lost its first 'v' line without
+    # a word (tag '\ufeffv' unknown), shifting every index; an .xyz's first point was refused.
+    bom = b"\xef\xbb\xbf"
+    p = tmp_path / "bom.obj"
+    p.write_bytes(bom + b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
+    mesh = jp.load(p)
+    assert mesh.n_vertices == 4 and mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    q = tmp_path / "bom.xyz"
+    q.write_bytes(bom + b"1 0 0\n0 1 0\n0 0 1\n1 1 1\n")
+    np.testing.assert_array_equal(jp.load_points(q)[0], [1.0, 0.0, 0.0])

@@ -49,7 +49,7 @@ def read_text(path) -> str:
         raise MeshFileError(f"{path}: the file looks binary but its extension says text; "
                             "is it the right file?")
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8-sig")     # a byte-order mark (Windows editors) is not text
     except UnicodeDecodeError:
         return data.decode("latin-1")
 

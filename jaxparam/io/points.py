@@ -47,7 +47,7 @@ def load_points(path) -> np.ndarray:
 def _read_xyz(p, path) -> np.ndarray:
     """The ``(N, 3)`` points of a text file, one ``x y z`` a line; ``path`` as given, for messages."""
     rows = []
-    for line_no, raw in enumerate(p.read_text(errors="replace").splitlines(), 1):
+    for line_no, raw in enumerate(p.read_text(encoding="utf-8-sig", errors="replace").splitlines(), 1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
