@@ -24,8 +24,8 @@ def disk_check(mesh: TriMesh, where: str) -> None:
         sizes = np.bincount(t.components[t.components >= 0])
         raise TopologyError(
             f"{where}: the mesh has {t.n_components} connected components (vertex counts "
-            f"{first_few(sizes.tolist())}); parameterize each on its own "
-            "(e.g. trimesh's split) or keep the largest.")
+            f"{first_few(sizes.tolist())}); {_unstitched(mesh) or ''}parameterize each on its "
+            "own (e.g. trimesh's split) or keep the largest.")
     if t.is_closed:
         raise TopologyError(
             f"{where}: the mesh is closed (no boundary, genus {t.genus}); a disk method needs a "
@@ -35,6 +35,27 @@ def disk_check(mesh: TriMesh, where: str) -> None:
         raise TopologyError(
             f"{where}: the mesh has genus {t.genus} with {len(t.boundary_loops)} boundary loops; a "
             "disk method needs genus 0: cut the handles open first.")
+
+
+def _unstitched(mesh: TriMesh) -> str | None:
+    """A sentence naming coincident vertices of different components (faces that meet but are
+    not stitched, e.g. a triangle soup), with the remedy; None when there are none or the
+    positions are traced."""
+    if isinstance(mesh.vertices, jax.core.Tracer):
+        return None
+    t = mesh.topology
+    V = np.asarray(mesh.vertices)[t.referenced]
+    ids = np.flatnonzero(t.referenced)
+    _, first, inv = np.unique(V, axis=0, return_index=True, return_inverse=True)
+    twin = ids[first[inv.reshape(-1)]]                   # each vertex's first equal vertex
+    split = np.flatnonzero((twin != ids) & (t.components[twin] != t.components[ids]))
+    if not split.size:
+        return None
+    a, b = int(twin[split[0]]), int(ids[split[0]])
+    return (f"vertices {a} and {b} coincide but lie in different components ({split.size} such "
+            "copies in all): the faces are not stitched (a triangle soup, as STL exporters write); "
+            "merge coincident vertices first (trimesh.Trimesh(V, F) does, with its default "
+            "process=True), or ")
 
 
 def fill_holes(mesh: TriMesh) -> tuple[TriMesh, int]:

@@ -232,3 +232,20 @@ def test_meshless_k_must_be_a_positive_integer(k):
         jp.meshless_map(P, k=k)
     with pytest.raises(jp.errors.PointCloudError, match="must be a positive integer"):
         jp.reconstruct_surface(P, k=k)
+
+
+def test_a_triangle_soup_is_named_as_such():
+    # Found in QA on a triangle-soup OBJ (every face with its own three vertices, as STL
+    # exporters write): the error only said "1653 connected components ... parameterize each
+    # on its own", where the remedy is to merge the coincident vertices.
+    mesh = jp.shapes.graph_surface(4)
+    F = np.asarray(mesh.faces)
+    soup = jp.TriMesh(np.asarray(mesh.vertices)[F.reshape(-1)], np.arange(F.size).reshape(-1, 3))
+    with pytest.raises(TopologyError, match=r"18 connected components.*vertices \d+ and \d+ "
+                       r"coincide but lie in different components.*triangle soup.*merge"):
+        jp.convex_map(soup)
+    two = jp.TriMesh(np.vstack([mesh.vertices, mesh.vertices + 5.0]),
+                     np.vstack([F, F + mesh.n_vertices]))
+    with pytest.raises(TopologyError, match="2 connected components") as e:
+        jp.convex_map(two)
+    assert "soup" not in str(e.value)
