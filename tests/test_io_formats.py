@@ -383,3 +383,18 @@ def test_a_utf8_byte_order_mark_is_not_part_of_the_first_line(tmp_path):
     q = tmp_path / "bom.xyz"
     q.write_bytes(bom + b"1 0 0\n0 1 0\n0 0 1\n1 1 1\n")
     np.testing.assert_array_equal(jp.load_points(q)[0], [1.0, 0.0, 0.0])
+
+
+def test_save_refuses_nan_uvs_at_the_vertices_of_faces(tmp_path):
+    # Found in QA: jp.save wrote an all-nan map as UVs of 0 (a file of collapsed triangles,
+    # silently); nan stays allowed, and written as 0, only at vertices in no face.
+    mesh = jp.shapes.graph_surface(4)
+    uv = np.asarray(jp.convex_map(mesh))
+    bad = uv.copy()
+    bad[[3, 7]] = np.nan
+    with pytest.raises(MeshError, match=r"uv is not finite at vertices 3, 7 \(2 in all\)"):
+        jp.save(tmp_path / "bad.obj", mesh, bad)
+    assert not (tmp_path / "bad.obj").exists()
+    stray = jp.TriMesh(np.vstack([mesh.vertices, [[9.0, 9.0, 9.0]]]), mesh.faces)
+    jp.save(tmp_path / "ok.obj", stray, np.vstack([uv, [[np.nan, np.nan]]]))
+    np.testing.assert_allclose(jp.load(tmp_path / "ok.obj").uv[:-1], uv)

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MeshError, MeshFileError
+from ..errors import MeshError, MeshFileError, first_few
 from ..mesh import TriMesh
 from .files import atomic_write, existing_file
 from .gltf import gltf_bytes, read_gltf
@@ -150,6 +150,14 @@ def _uvs(mesh: TriMesh, uv, uv_faces):
     if uv.shape != (n, 2):
         raise MeshError(f"save: uv must have shape ({n}, 2), one row per vertex, got {uv.shape} "
                         "(per-corner UVs: pass the (t, 2) table as uv with uv_faces=(m, 3)).")
+    # nan is the UV of a vertex in no face (written as 0); at a face's vertex it is a failed map.
+    used = np.zeros(n, bool)
+    used[np.asarray(mesh.faces).reshape(-1)] = True
+    bad = np.flatnonzero(used & ~np.all(np.isfinite(uv), axis=1))
+    if bad.size:
+        raise MeshError(f"save: uv is not finite at vertices {first_few(bad)} (vertex "
+                        f"{int(bad[0])} has {tuple(float(x) for x in uv[bad[0]])}), which belong to "
+                        "faces; nothing was written: check the map that made these UVs.")
     return uv, None, None
 
 
