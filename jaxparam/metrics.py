@@ -96,11 +96,12 @@ def face_distortion(mesh, uv) -> dict:
 
 
 def flips(mesh, uv) -> int:
-    """Number of faces whose UV image is clockwise or degenerate (signed area <= 0)."""
+    """Number of faces whose UV image is clockwise or degenerate (signed area <= 0, or not
+    finite)."""
     refuse_traced("metrics.flips", mesh, uv, vertices=False)
     Q = np.asarray(uv, np.float64)[mesh.faces]
     d1, d2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
-    return int(np.sum(0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) <= 0))
+    return int(np.sum(~(0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) > 0)))   # nan: flipped
 
 
 def boundary_overlaps(mesh, uv) -> int:
@@ -212,6 +213,9 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
     """
     mesh = as_mesh(mesh, "distortion")
     refuse_traced("distortion", mesh, uv)
+    if np.shape(uv) != (mesh.n_vertices, 2):
+        raise MeshError(f"distortion: uv must have shape ({mesh.n_vertices}, 2), one row per "
+                        f"vertex, got {np.shape(uv)}.")
     # Concrete values (always, here): the per-face quantities in NumPy, no compilation; equal
     # to face_distortion's JAX values to about 1e-15 relative (tests/test_speed_paths.py).
     fd = host.face_quantities(np.asarray(mesh.vertices, np.float64), mesh.faces,
@@ -236,7 +240,8 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
     t = mesh.topology
     cert = theorem1(mesh, uv, weights=weights) if t.boundary_loops else None
     return DistortionReport(
-        vertices=t.n_vertices, faces=t.n_faces, flips=int(np.sum(auv <= 0)),
-        degenerate=int(np.sum(auv == 0)), boundary_overlaps=boundary_overlaps(mesh, uv),
+        # A face with a non-finite UV corner is no triangle: flipped and degenerate both.
+        vertices=t.n_vertices, faces=t.n_faces, flips=int(np.sum(~(auv > 0))),
+        degenerate=int(np.sum((auv == 0) | ~np.isfinite(auv))), boundary_overlaps=boundary_overlaps(mesh, uv),
         sym_dirichlet=sd, mips=mips, max_aspect=aspect, angle_distortion=float(ang),
         area_distortion=area_d, unreferenced_vertices=int((~t.referenced).sum()), theorem1=cert)

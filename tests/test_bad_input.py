@@ -249,3 +249,18 @@ def test_a_triangle_soup_is_named_as_such():
     with pytest.raises(TopologyError, match="2 connected components") as e:
         jp.convex_map(two)
     assert "soup" not in str(e.value)
+
+
+def test_distortion_counts_nan_faces_and_names_a_wrong_shape(grid_mesh):
+    # Found in QA: jp.distortion of an all-nan map said flips=0, degenerate=0 (nan <= 0 is
+    # False), and a (5, 2) uv gave a raw IndexError.
+    uv = np.asarray(jp.convex_map(grid_mesh))
+    bad = uv.copy()
+    bad[0] = np.nan
+    n_bad = int(np.any(grid_mesh.faces == 0, axis=1).sum())
+    rep = jp.distortion(grid_mesh, bad)
+    assert rep.flips == n_bad and rep.degenerate == n_bad
+    assert jp.metrics.flips(grid_mesh, bad) == n_bad
+    assert jp.distortion(grid_mesh, uv).flips == 0
+    with pytest.raises(MeshError, match=r"distortion: uv must have shape \(\d+, 2\).*got \(5, 2\)"):
+        jp.distortion(grid_mesh, uv[:5])
