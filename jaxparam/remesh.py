@@ -645,10 +645,18 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
                         "every vertex of a face.")
     if not used.all():
         U = np.where(used[:, None], U, U[used][0])
-    flipped = np.flatnonzero(signed_area2(U, mesh.faces) <= 0)
+    flipped = np.flatnonzero(~(signed_area2(U, mesh.faces) > 0))
     if flipped.size:
+        on_loop = np.zeros(mesh.n_vertices, bool)
+        on_loop[t.boundary_loops[0]] = True
+        if np.all(on_loop[np.asarray(mesh.faces)[flipped]]):
+            why = ("every corner of these faces is on the boundary, and the boundary map put "
+                   "each face's three corners on one straight side of its polygon (Theorem 1's "
+                   "dividing edges): use the circle boundary (boundary='circle', the default)")
+        else:
+            why = "use a convex-combination map with a convex boundary"
         raise MeshError(f"remesh: the parameterization is not one-to-one: faces {first_few(flipped)} "
-                        "are flipped or degenerate in the UVs; use a convex-combination map.")
+                        f"are flipped or degenerate in the UVs; {why}.")
     loop = t.boundary_loops[0]
     uv0, F0, s0, curve = base_domain(U, loop, fan)
     uvj, H, steps, s_all = _refine(uv0, F0, s0, curve, int(levels))

@@ -258,3 +258,14 @@ def test_unreferenced_vertices_do_not_block_a_remesh():
     bad[3] = np.nan                                   # a vertex of a face: named in the error
     with pytest.raises(MeshError, match="not finite at vertices 3"):
         jp.remesh(stray, bad, levels=1)
+
+
+def test_flat_faces_of_a_square_boundary_map_get_the_right_remedy():
+    # Found in QA (snail refined, jaxparam remesh --boundary square): the error said "use a
+    # convex-combination map", which the map was; the cause is faces with all three corners on
+    # one side of the square.
+    mesh = jp.shapes.cylinder_patch(12, 4)
+    uv = jp.convex_map(mesh, boundary="square")
+    with pytest.raises(MeshError, match=r"faces \d+, \d+ \(2 in all\) are flipped or degenerate.*"
+                       r"one straight side.*use the circle boundary"):
+        jp.remesh(mesh, uv, levels=1)
