@@ -509,6 +509,8 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
         return reweighted_stretch_map(mesh)       # no Newton: one Cholesky per round
     iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
     start = convex_map(mesh, weights=weights, boundary="circle")
+    if mesh.topology.interior.size == 0:    # every vertex on the circle: nothing to minimize
+        return start
     if default and not isinstance(mesh.vertices, jax.core.Tracer):
         V = np.asarray(mesh.vertices, np.float64)
         area = np.asarray(geometry.face_areas(V, mesh.faces))

@@ -269,3 +269,12 @@ def test_flat_faces_of_a_square_boundary_map_get_the_right_remedy():
     with pytest.raises(MeshError, match=r"faces \d+, \d+ \(2 in all\) are flipped or degenerate.*"
                        r"one straight side.*use the circle boundary"):
         jp.remesh(mesh, uv, levels=1)
+
+
+def test_a_mesh_with_no_interior_vertex_is_remeshed_from_its_boundary_map():
+    # Found in QA: jaxparam remesh of one triangle (or of an 8 x 2 strip) exited 4 with
+    # "minimize: no free vertex ... use free_boundary=True", an option remesh does not have.
+    for mesh in (jp.TriMesh(np.eye(3), [[0, 1, 2]]), jp.shapes.plane_grid(8, 2)):
+        semi = jp.remesh(mesh, levels=2)
+        assert np.all(np.isfinite(np.asarray(semi.mesh.vertices)))
+        assert (area2(np.asarray(semi.mesh.uv), semi.mesh.faces) > 0).all()
