@@ -417,3 +417,14 @@ def test_reconstruction_fields_agree(surface_points):
     uv, bnd = jp.meshless_map(P, weights="shape_preserving")
     assert rec.boundary.tolist() in [np.roll(bnd, s).tolist() for s in range(bnd.size)]
     assert np.all(rec.mesh.topology.is_boundary[rec.boundary] | ~rec.mesh.topology.referenced[rec.boundary])
+
+
+def test_points_that_are_all_on_the_boundary_are_mapped_by_the_boundary_map():
+    # Found in QA: four points with k=3 (every one on the boundary polygon) raised numpy's
+    # "zero-size array to reduction operation maximum" from the fan weights.
+    P = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.1]])
+    uv, bnd = jp.meshless_map(P, k=3)
+    assert sorted(np.asarray(bnd).tolist()) == [0, 1, 2, 3]
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(uv), axis=1), 1.0)
+    rec = jp.reconstruct_surface(P, k=3)
+    assert rec.mesh.n_faces == 2 and np.all(np.isfinite(np.asarray(rec.uv)))

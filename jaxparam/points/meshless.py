@@ -225,6 +225,11 @@ def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary:
     fixed[bnd] = True
     E = wts.fan_entries(graph.indptr, graph.indices, fixed)
     _check_solvable(E, N, bnd)
+    if E.n_rows == 0:       # every point is on the boundary polygon: nothing to solve for
+        Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
+        uv_b = _boundary_map(Pj, jax.device_put(bnd), boundary=boundary, spacing=spacing)
+        U = jnp.zeros((N, 2)).at[jax.device_put(bnd)].set(uv_b)
+        return np.asarray(U) if host and wts.is_concrete(P) else U
     slot = np.full(N, -1, np.int64)
     slot[E.free] = np.arange(E.n_rows)
     bslot = np.full(N, -1, np.int64)
