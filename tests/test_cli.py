@@ -324,3 +324,15 @@ def test_flatten_a_strip_with_no_interior_vertex(tmp_path, capsys):
     r = json.loads(rep.read_text())
     assert r["flips"] == 0 and r["theorem1"]["holds"] is True
     assert jp.load(out).uv.shape == (16, 2)
+
+
+def test_library_warnings_are_printed_as_the_commands_own_lines(tmp_path, capsys):
+    # Found in QA: "jaxparam remesh ... -o semi.off" printed Python's
+    # "/.../cli/commands.py:103: UserWarning: save: ... OFF holds no texture coordinates"
+    # followed by the source line "save(args.output, mesh, uv)".
+    p = tmp_path / "g.obj"
+    jp.save(p, jp.shapes.graph_surface(5))
+    assert main(["flatten", str(p), "-o", str(tmp_path / "flat.off")]) == 0
+    err = capsys.readouterr().err
+    assert "jaxparam flatten: warning: save: " in err and "OFF holds no texture coordinates" in err
+    assert "UserWarning" not in err and "commands.py" not in err

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from ..errors import JaxparamError
 from ..io import check_output_format
@@ -175,9 +176,14 @@ def main(argv=None) -> int:
     if args.quiet:
         config.progress = False
     try:
-        if getattr(args, "output", None) and args.command != "batch":
-            check_output_format(args.output)        # an unknown extension fails before work
-        return args.func(args)
+        with warnings.catch_warnings():
+            # The library's warnings as the command's own lines, not Python's
+            # "file.py:103: UserWarning: ... <source line>".
+            warnings.showwarning = (lambda message, *_a, **_k: print(
+                f"jaxparam {args.command}: warning: {message}", file=sys.stderr))
+            if getattr(args, "output", None) and args.command != "batch":
+                check_output_format(args.output)        # an unknown extension fails before work
+            return args.func(args)
     except JaxparamError as exc:
         code, message = failure(exc)
         print(f"jaxparam {args.command}: {message}", file=sys.stderr)
