@@ -336,3 +336,17 @@ def test_library_warnings_are_printed_as_the_commands_own_lines(tmp_path, capsys
     err = capsys.readouterr().err
     assert "jaxparam flatten: warning: save: " in err and "OFF holds no texture coordinates" in err
     assert "UserWarning" not in err and "commands.py" not in err
+
+
+def test_fit_names_seamed_uvs_as_such(tmp_path, capsys):
+    # Found in QA: jaxparam fit on an atlas OBJ (vt per corner) said "the mesh has no
+    # per-vertex texture coordinates (vt)", though the file has vt lines.
+    mesh = jp.shapes.graph_surface(4)
+    F = np.asarray(mesh.faces)
+    tex = np.asarray(jp.convex_map(mesh))[F.reshape(-1)]
+    tex[0] += 0.01                                     # a seam at vertex F[0, 0]
+    p = tmp_path / "seamed.obj"
+    jp.save(p, mesh, tex, uv_faces=np.arange(F.size).reshape(-1, 3))
+    assert main(["fit", str(p), "-o", str(tmp_path / "s.obj")]) == 3
+    err = capsys.readouterr().err
+    assert "texture coordinates have seams" in err and "jaxparam flatten" in err

@@ -188,6 +188,10 @@ def cmd_fit(args) -> int:
     from ..fitting import fit_surface
 
     mesh, clock = begin(args.mesh, compile_cache=False)
+    if mesh.uv is None and mesh.texcoords is not None:
+        raise MeshFileError(f"{args.mesh}: the mesh's texture coordinates have seams (several "
+                            "UVs at one vertex, as an atlas writes); a surface is fitted over one "
+                            "UV per vertex, a disk map: jaxparam flatten MESH -o MESH_WITH_UV.obj")
     if mesh.uv is None:
         raise MeshFileError(f"{args.mesh}: the mesh has no per-vertex texture coordinates (vt); "
                             "flatten it first: jaxparam flatten MESH -o MESH_WITH_UV.obj")
