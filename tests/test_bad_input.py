@@ -114,6 +114,8 @@ def test_user_weights_of_wrong_sign(grid_mesh):
     ("empty.off", b"", r": the file is empty"),
     ("noface.obj", b"v 0 0 0\nv 1 0 0\n", r"no faces"),
     ("badnum.obj", b"v 0 0 x\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", r"line 1.*'x'"),
+    # Found in QA: "a face with 2 vertices but 2 indices given".
+    ("twogon.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", r"line 6: a face needs at least 3 vertices, this one has 2"),
     ("junk.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n", r"cannot read the file as \.ply \(.+\); check the format"),
 ])
 def test_malformed_files(tmp_path, name, content, match):

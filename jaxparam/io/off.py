@@ -66,7 +66,10 @@ def read_off(path):
             idx = [int(t) for t in toks[1:1 + k]]
         except (ValueError, IndexError):
             raise MeshFileError(f"{path}, line {ln}: cannot read a face from {' '.join(toks)!r}.") from None
-        if k < 3 or len(idx) != k:
+        if k < 3:
+            raise MeshFileError(f"{path}, line {ln}: a face needs at least 3 vertices, this one "
+                                f"has {k}; remove the line (or the file's edges and points).")
+        if len(idx) != k:
             raise MeshFileError(f"{path}, line {ln}: a face with {k} vertices but {len(idx)} indices given.")
         bad = [i for i in idx if i < 0 or i >= nv]
         if bad:
