@@ -350,3 +350,17 @@ def test_fit_names_seamed_uvs_as_such(tmp_path, capsys):
     assert main(["fit", str(p), "-o", str(tmp_path / "s.obj")]) == 3
     err = capsys.readouterr().err
     assert "texture coordinates have seams" in err and "jaxparam flatten" in err
+
+
+def test_meshless_merges_duplicate_points_when_asked(tmp_path, capsys):
+    # Found in QA: a scan with repeated points was refused with "pass merge_duplicates=True",
+    # an option the command did not have, so no command line could read it.
+    P = jp.shapes.graph_surface(8).vertices
+    pts = tmp_path / "dups.xyz"
+    np.savetxt(pts, np.vstack([P, P[:5]]))
+    out = tmp_path / "m.obj"
+    assert main(["meshless", str(pts), "-o", str(out)]) == 3
+    assert "pass --merge-duplicates" in capsys.readouterr().err
+    assert main(["meshless", str(pts), "-o", str(out), "--merge-duplicates"]) == 0
+    mesh = jp.load(out)
+    assert mesh.n_vertices == len(P) + 5 and mesh.faces.max() < len(P)

@@ -97,6 +97,10 @@ def _add_meshless(sub) -> None:
     add_mirrored(p, "--k", reconstruct_surface, "k", "neighbours per point")
     add_named(p, "--weights", POINT_WEIGHTS, default_of(reconstruct_surface, "weights"))
     add_named(p, "--boundary", ["circle", "square"], default_of(reconstruct_surface, "boundary"))
+    p.add_argument("--merge-duplicates", action="store_true",
+                   default=default_of(reconstruct_surface, "merge_duplicates"),
+                   help="keep one of each set of equal points (scans often repeat points); the "
+                        "copies get their first's UV and stay out of the faces")
 
 
 def _add_fit(sub) -> None:

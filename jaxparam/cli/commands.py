@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..clock import StageClock
-from ..errors import MeshFileError
+from ..errors import MeshFileError, PointCloudError
 from ..io import load, load_points, save
 from ..options import canonical
 from .arguments import flatten_options
@@ -167,8 +167,15 @@ def cmd_meshless(args) -> int:
     from ..points import reconstruct_surface
 
     P, clock = begin(args.points, reader=load_points)
-    rec = reconstruct_surface(P, k=args.k, weights=canonical(args.weights),
-                              boundary=canonical(args.boundary))
+    try:
+        rec = reconstruct_surface(P, k=args.k, weights=canonical(args.weights),
+                                  boundary=canonical(args.boundary),
+                                  merge_duplicates=args.merge_duplicates)
+    except PointCloudError as exc:
+        if "merge_duplicates=True" not in str(exc):
+            raise
+        raise PointCloudError(str(exc).replace("pass merge_duplicates=True",
+                                               "pass --merge-duplicates")) from None
     clock("meshless_map_and_reconstruction")
     if rec.outliers.size:
         print(f"jaxparam meshless: warning: {rec.outliers.size} outliers left out of the mesh "
