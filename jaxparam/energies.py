@@ -44,7 +44,7 @@ from . import tol
 from .errors import MeshError
 
 __all__ = ["Energy", "Densities", "energy", "ENERGIES", "get", "mips_prop2", "total",
-           "params_equal", "captures_tracer", "density_stretch"]
+           "params_equal", "captures_tracer", "density_stretch", "NO_FREE_MINIMUM"]
 
 
 class Densities(NamedTuple):
@@ -494,6 +494,15 @@ def captures_tracer(en: Energy) -> bool:
     vals = _captured(en.density) + _captured(en.of_J) + _captured(en.of_sv)
     return any(isinstance(leaf, jax.core.Tracer) for v in vals
                for leaf in jax.tree_util.tree_leaves(v))
+
+
+#: Built-in energies that have no useful minimum with a free boundary, and why: the map
+#: runs off to a trivial one (measured on snail scaled by 1e4: "dirichlet" shrank it to
+#: 1e-4 across, "stretch" grew it to 2e7, both reported converged).
+NO_FREE_MINIMUM = {
+    "dirichlet": "shrinks the map towards a point (its energy falls to 0 there)",
+    "stretch": "grows the map without bound (its energy falls to 0 as the map grows)",
+}
 
 
 def get(e) -> Energy:

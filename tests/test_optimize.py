@@ -334,3 +334,15 @@ def test_buckets_off_is_the_unpadded_computation(mesh, start):
     finally:
         jp.config.buckets = None
     assert jp.config.buckets
+
+
+@pytest.mark.parametrize("energy, what", [("dirichlet", "shrinks the map"),
+                                          ("stretch", "grows the map")])
+def test_a_free_boundary_is_refused_for_energies_with_no_free_minimum(energy, what):
+    # Found in QA (jaxparam flatten snail*1e4 --energy dirichlet / stretch --free-boundary):
+    # "converged", exit 0, with the map 1e-4 across (dirichlet) or 2e7 across (stretch).
+    mesh = jp.shapes.graph_surface(6)
+    with pytest.raises(jp.MeshError, match=f"'{energy}' with a free boundary {what}.*free_boundary=False"):
+        jp.minimize(mesh, energy, free_boundary=True)
+    res = jp.minimize(mesh, energy, max_iters=5, verbose=False)      # a fixed boundary is fine
+    assert np.all(np.isfinite(np.asarray(res.uv)))

@@ -141,6 +141,11 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
             "parameter under jax.grad captured by a lambda), which its compiled kernels cannot "
             "take; pass it as a parameter instead: jp.energy(lambda s1, s2, p: ..., params=p), "
             "and jax.grad reaches it through the implicit gradient.")
+    if free_boundary and en_mod.ENERGIES.get(en.name) is en and en.name in en_mod.NO_FREE_MINIMUM:
+        raise MeshError(
+            f"minimize: {en.name!r} with a free boundary {en_mod.NO_FREE_MINIMUM[en.name]}; keep "
+            "the boundary fixed (free_boundary=False), or minimize an energy with a free "
+            "minimum: 'symmetric_dirichlet', 'arap', 'conformal' or 'mips'.")
     solver = solver_from(solver)
     if max_iters < 0:
         raise MeshError(f"minimize: max_iters must be >= 0, got {max_iters}.")
