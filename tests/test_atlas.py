@@ -546,3 +546,11 @@ def test_scale_invariant_energies_are_refused_before_any_work(energy):
     # shrinking when the energy ignores scale.
     with pytest.raises(jp.MeshError, match=f"energy '{energy}' is scale-invariant.*symmetric_dirichlet"):
         jp.atlas(jp.shapes.sphere(1), energy=energy)
+
+
+@pytest.mark.parametrize("energy", ["dirichlet", "stretch"])
+def test_energies_with_no_free_minimum_are_refused(energy):
+    # Found in QA with minimize: a free boundary shrinks a Dirichlet map to a point and grows a
+    # stretch map without bound; a chart's map has a free boundary.
+    with pytest.raises(jp.MeshError, match=f"energy '{energy}' with a chart's free boundary"):
+        jp.atlas(jp.shapes.sphere(1), energy=energy)

@@ -186,6 +186,10 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         raise MeshError(f"atlas: the energy {en.name!r} is scale-invariant, so a chart's free "
                         "boundary lets its triangles shrink to nothing (no texels); use one that "
                         "penalizes area change: symmetric_dirichlet (the default) or arap.")
+    if en_mod.ENERGIES.get(en.name) is en and en.name in en_mod.NO_FREE_MINIMUM:
+        raise MeshError(f"atlas: the energy {en.name!r} with a chart's free boundary "
+                        f"{en_mod.NO_FREE_MINIMUM[en.name]}; use symmetric_dirichlet (the "
+                        "default) or arap.")
     t0 = time.perf_counter()
     seconds = {}
     V = np.asarray(mesh.vertices, np.float64)
