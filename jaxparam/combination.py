@@ -154,7 +154,12 @@ def solve(system: CombinationSystem, vals, rhs, *, symmetric: bool, backend: str
     """
     if isinstance(vals, jax.core.Tracer) or isinstance(rhs, jax.core.Tracer):
         return sparse.solve(system.pattern, vals, rhs, symmetric=symmetric, backend=backend)
-    fac = sparse.factorize(system.pattern, np.asarray(vals), symmetric=symmetric, backend=backend)
+    # From the differentiable solve's cache: under an eager jax.grad the custom_jvp's forward
+    # solve comes here with concrete values and its adjoint solve goes through the cache, which
+    # then holds this factor, checked (it used to factorize again and check the adjoint's
+    # residual, which an ill-conditioned matrix could fail after a forward that passed).
+    fac = sparse.cached_factorization(system.pattern, np.asarray(vals, np.float64), bool(symmetric),
+                                      backend)
     return fac.solve(np.asarray(rhs, np.float64))
 
 

@@ -38,8 +38,8 @@ from __future__ import annotations
 
 from .backends import BACKENDS, Factorization, available_backends, factorize, warm_up
 from .counters import stats
-from .differentiable import solve
+from .differentiable import cached_factorization, solve
 from .pattern import Pattern
 
-__all__ = ["Pattern", "Factorization", "factorize", "solve", "available_backends", "stats",
-           "warm_up"]
+__all__ = ["Pattern", "Factorization", "factorize", "cached_factorization", "solve",
+           "available_backends", "stats", "warm_up"]

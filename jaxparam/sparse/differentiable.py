@@ -38,7 +38,11 @@ def _fingerprint(values: np.ndarray) -> bytes:
     return values[::step].tobytes() + values[-1:].tobytes()
 
 
-def _cached_factorization(pattern: Pattern, values: np.ndarray, symmetric: bool, backend: str):
+def cached_factorization(pattern: Pattern, values: np.ndarray, symmetric: bool, backend: str):
+    """The factorization of ``values (nnz,)`` on ``pattern`` from the cache of the most recent
+    ones (:func:`solve`'s), factorized and cached on a miss.  A host computation that will be
+    differentiated takes its factor from here, so that the adjoint solves find it, already
+    checked, instead of factorizing again."""
     values = np.ascontiguousarray(values, np.float64)
     key = (pattern.uid, symmetric, backend, values.size, _fingerprint(values))
     with cache_lock:
@@ -133,7 +137,7 @@ def solve(pattern: Pattern, values, rhs, *, symmetric: bool = False, backend: st
         raise SolverError(f"sparse.solve: rhs must have shape ({pattern.n},) or ({pattern.n}, k), "
                           f"got {tuple(np.shape(rhs))}.", stage="solve")
     if not any(isinstance(a, jax.core.Tracer) for a in (values, rhs)):
-        fac = _cached_factorization(pattern, np.asarray(values, np.float64), bool(symmetric), backend)
+        fac = cached_factorization(pattern, np.asarray(values, np.float64), bool(symmetric), backend)
         return jnp.asarray(fac.solve(np.asarray(rhs, np.float64)))
     return _solve_jit(jnp.asarray(values, jnp.float64), jnp.asarray(rhs, jnp.float64),
                       pattern.rows, pattern.indices, pattern.indptr, np.int64(pattern.uid),
@@ -168,7 +172,7 @@ def _host_solve(symmetric, backend, transpose, trust, core_ndim, values, b, indp
 
     vlead, blead = values.shape[:-1], b.shape[:b.ndim - core_ndim]
     if not vlead and not blead:
-        return solve_with(_cached_factorization(pattern, values, symmetric, backend), b)
+        return solve_with(cached_factorization(pattern, values, symmetric, backend), b)
     # Batched: factorize each distinct matrix once; the right-hand sides that share one are
     # solved together, as the columns of one block.
     lead = np.broadcast_shapes(vlead, blead)
@@ -180,7 +184,7 @@ def _host_solve(symmetric, backend, transpose, trust, core_ndim, values, b, indp
     x = np.empty((iv.size,) + core)
     for v in np.unique(iv):
         members = np.flatnonzero(iv == v)
-        fac = _cached_factorization(pattern, vflat[v], symmetric, backend)
+        fac = cached_factorization(pattern, vflat[v], symmetric, backend)
         if members.size == 1:
             x[members[0]] = solve_with(fac, bflat[ib[members[0]]])
             continue
