@@ -287,6 +287,51 @@ def test_fill_square_is_bottom_left_and_keeps_margins():
     assert pack.fill_square(masks, 40, margin) is None
 
 
+def test_fill_contact_keeps_margins_and_turns_and_touches():
+    # the U and blobs: every mask inside the square, none within the margin of another,
+    # every mask touching the border or another's margin ring (what the placement maximizes),
+    # the turns proper (each placed mask is np.rot90 of its own, never a mirror); on 24 ragged
+    # blobs it fills a square about as small as the
+    # bottom-left fill's (72 cells against 70: neither wins everywhere, so pack_charts
+    # tries both at each scale)
+    masks = _u_and_blobs()
+    margin, size = 2, 64
+    pos, turn, side = pack.fill_contact(masks, size, margin)
+    assert side == size
+    from scipy import ndimage
+    st = np.ones((2 * margin + 1, 2 * margin + 1), bool)
+    placed = []
+    for c, M in enumerate(masks):
+        Mt = pack._turns(M)[turn[c]][0]
+        assert np.array_equal(Mt, np.rot90(M, k=[0, -1, 2, 1][turn[c]]))
+        i, j = pos[c]
+        assert 0 <= i and i + Mt.shape[1] <= size and 0 <= j and j + Mt.shape[0] <= size, c
+        G = np.zeros((size, size), bool)
+        G[j:j + Mt.shape[0], i:i + Mt.shape[1]] = Mt
+        placed.append(G)
+    frame = np.ones((size + 2, size + 2), bool)
+    frame[1:-1, 1:-1] = False
+    for a in range(len(masks)):
+        others = np.any([placed[b] for b in range(len(masks)) if b != a], axis=0)
+        assert not np.any(ndimage.binary_dilation(placed[a], st) & others), a
+        ring = ndimage.binary_dilation(np.pad(placed[a], 1), np.ones((3, 3), bool))
+        near = np.pad(ndimage.binary_dilation(others, st), 1) | frame
+        assert np.any(ring & near), a                           # it touches something
+    assert pack.fill_contact(masks, 40, margin) is None
+    # ragged blobs (random boundary teeth): the smallest square each fill manages
+    rng = np.random.default_rng(7)
+    ragged = []
+    for r in rng.uniform(4.0, 12.0, 24):
+        y, x = np.mgrid[: int(2 * r) + 1, : int(2 * r) + 1] - r
+        th = np.arctan2(y, x)
+        rad = r * (0.75 + 0.25 * np.sin(rng.integers(3, 7) * th + rng.uniform(0, 6)))
+        ragged.append(np.hypot(x, 1.3 * y) <= rad)
+    smallest = lambda fill: min(s for s in range(60, 200, 2) if fill(ragged, s, 1) is not None)
+    area = sum(int(M.sum()) for M in ragged)
+    assert area / smallest(pack.fill_contact) ** 2 >= 0.45
+    assert smallest(pack.fill_contact) <= 1.1 * smallest(pack.fill_square)
+
+
 def test_plan_splits_cuts_a_u_into_convex_disks_and_leaves_a_square():
     # a flat U flattened as itself: one cut makes two disks whose hulls hold much less
     # area than the U's hull; a square is not worth a cut; max_new caps the new charts
