@@ -27,11 +27,13 @@ and keeps the largest scale that fits: bottom-left filling of a fixed square nes
 last charts into the gaps the growing square leaves (session 8, on the same charts: 3holes
 59.6 -> 61.9 %, rocker-arm 60.8 -> 63.0 %, decimated-knight 64.8 -> 65.8 %, bunny 65.1 ->
 66.0 %, cow and halftunnel unchanged).  Each scale of that bisection is tried first by the
-most-contact fill (:func:`fill_contact`: each chart, over its four proper turns, at the free
-position whose ring of neighbouring cells touches the most placed charts' margins and the
-square's border; FFT correlations), then by the bottom-left fill: neither wins on every set
-of charts (session 10, same charts: bunny 66.0 -> 70.3 %, decimated-knight 70.3 -> 71.3 %,
-3holes 69.5 -> 70.0 %, cow, camel_b, camelhead, rocker-arm and halftunnel unchanged).
+bottom-left fill, and when that fails by the most-contact fill (:func:`fill_contact`: each
+chart, over its four proper turns, at the free position whose ring of neighbouring cells
+touches the most placed charts' margins and the square's border; FFT correlations, two to
+four times the bottom-left fill's time): neither wins on every set of charts, and the
+coverage depends only on the scale that fits (session 10, same charts: bunny 66.0 -> 70.3 %,
+decimated-knight 70.3 -> 71.3 %, 3holes 69.5 -> 70.0 %; cow, camel_b, camelhead, rocker-arm
+and halftunnel unchanged).
 """
 from __future__ import annotations
 
@@ -422,10 +424,10 @@ def fill_contact(masks, size: int, margin: int, order: np.ndarray | None = None)
     """Place masks (largest first) in a fixed ``size x size`` raster, each at the free
     position (over its four proper turns) where it touches the most placed masks' margins
     and the square's border (:func:`_most_contact`), at least ``margin`` cells apart.
-    Tighter than :func:`fill_square` on charts with ragged outlines (session 10, same
-    charts, with both tried at each scale: bunny 66.0 -> 70.3 %, decimated-knight 70.3 ->
-    71.3 %, 3holes 69.5 -> 70.0 %).  **Returns:** ``None`` if one does not fit, else
-    ``(positions (c, 2) cells [u, v], turn (c,) int, size)``."""
+    Tighter than :func:`fill_square` on some sets of ragged charts, looser on others
+    (session 10, same charts, with both tried at each scale: bunny 66.0 -> 70.3 %,
+    decimated-knight 70.3 -> 71.3 %, 3holes 69.5 -> 70.0 %).  **Returns:** ``None`` if one
+    does not fit, else ``(positions (c, 2) cells [u, v], turn (c,) int, size)``."""
     occb = np.zeros((size, size), bool)
     st = np.ones((2 * margin + 1, 2 * margin + 1), bool) if margin else None
     pos = np.zeros((len(masks), 2), np.int64)
@@ -455,7 +457,7 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     side), ``margin_texels`` (the least gap between two charts, and between a chart and the
     square's border); ``fill``: the share of the raster the first scale expects
     to cover; ``max_attempts``: packings tried at most; ``refine_steps``: bisection steps
-    on the scale in the fixed square (:func:`fill_contact`, then :func:`fill_square` at each),
+    on the scale in the fixed square (:func:`fill_square`, else :func:`fill_contact` at each),
     between the growing-square packing's and ``refine_gain`` times its covered area (0: none).
     **Returns:** a :class:`Packing`.
     """
@@ -509,15 +511,15 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
                           f"{attempt} packings; lower margin_texels or raise texture_size.",
                           stage="pack")
     # bisection on the area covered, in the fixed square: lo fits (the packing above), hi may not;
-    # each scale is tried by the most-contact placement, then by the bottom-left fill
+    # a scale fits when the bottom-left fill or else the (slower) most-contact fill places all
     lo, hi = best[0] * size, best[0] * size * np.sqrt(refine_gain)       # cells per 3D unit
     for _ in range(int(refine_steps)):
         s = 0.5 * (lo + hi)
         masks = _chart_masks(local, seg, seg_of, s)
-        placed = fill_contact(masks, inner, m)
+        placed = fill_square(masks, inner, m)
         attempt += 1
         if placed is None:
-            placed = fill_square(masks, inner, m)
+            placed = fill_contact(masks, inner, m)
             attempt += 1
         if placed is None:
             hi = s
