@@ -449,7 +449,7 @@ def fill_contact(masks, size: int, margin: int, order: np.ndarray | None = None)
 
 def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 1024,
                 margin_texels: int = 2, fill: float = 0.72, max_attempts: int = 5,
-                refine_steps: int = 4, refine_gain: float = 1.12) -> Packing:
+                refine_steps: int = 6, refine_gain: float = 1.12) -> Packing:
     """Pack the charts' UVs (``uv (n_uv, 2)`` at 3D scale) into ``[0, 1]^2``.
 
     **Arguments:** ``uv_faces (m, 3)``, ``chart (m,)`` face charts, ``uv_chart (n_uv,)``,
@@ -458,7 +458,9 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     square's border); ``fill``: the share of the raster the first scale expects
     to cover; ``max_attempts``: packings tried at most; ``refine_steps``: bisection steps
     on the scale in the fixed square (:func:`fill_square`, else :func:`fill_contact` at each),
-    between the growing-square packing's and ``refine_gain`` times its covered area (0: none).
+    between the growing-square packing's and ``refine_gain`` times its covered area (0: none;
+    6 resolve the area to 0.2 %: against 4, session 10, same charts, 3holes 70.0 -> 70.4 %,
+    camelhead 72.1 -> 72.4 %, cow 71.7 -> 71.9 %, rocker-arm 70.7 -> 71.0 %, none lower).
     **Returns:** a :class:`Packing`.
     """
     k = int(chart.max()) + 1
