@@ -18,7 +18,10 @@ leave a corner over 150 degrees, or flatten a ring whose exponent ``a`` is off 1
 than about 3.5 % (sharply curved vertices, whose flattening distorts the map most, stay in
 the base domain: this took bunny's level-4 remesh from 1.7 % to 0.9 % of the diagonal).
 The rules are relaxed step by step (the bound on ``|log a|`` doubling each time, so the tips
-of thin parts go last), then dropped, when no collapse is left.  The levels are kept
+of thin parts go last), then dropped, when no collapse is left.  Optionally an area cap
+(:data:`AREA_CAPS`) bounds the input area a new face may hold, relaxed in doubling steps
+before the rules are; :func:`~jaxparam.manifold.manifold_map` decimates with each cap and keeps
+the base domain estimated closest.  The levels are kept
 (:class:`MapsHistory`) so points of the base domain can be pulled back exactly.  Work per level is proportional to the faces left, and each level removes a
 fixed share of the vertices, so the whole decimation costs about linear time.
 """
@@ -50,6 +53,16 @@ _RULES = ((0.2, np.cos(np.radians(150.0)), 0.035), (0.2, np.cos(np.radians(150.0
 #: Weight of the ring-area term of a collapse's cost against the (normalized) quadric error
 #: (MAPS's priority; 0: off, measured worse on bunny: 1.7 % -> 2.2-4.3 % at level 4).
 AREA_WEIGHT = 0.0
+
+#: The area caps :func:`maps_decimate` can balance the base domain with, ``(factor, doublings,
+#: reset)``: a collapse may not leave a new face holding more than ``factor * 2**k`` times the
+#: mean base face's share of the input's area (the held area of the flattened ring, spread
+#: evenly over it); ``k`` starts at 0, grows by one when no collapse passes (at most
+#: ``doublings`` times) before the shape and curvature rules are relaxed, and is set back to at
+#: most ``reset`` when they are.  Without a cap, quadric collapses let flat parts grow without
+#: bound (cow: one base face held 4.5x the mean share at 1,122 faces, 13.4x at the end).
+#: ``None``: no cap.
+AREA_CAPS = (None, (1.5, 3, 1), (1.5, 2, 0))
 
 #: Luby rounds per level (each adds collapses whose rings miss the ones already taken).
 ROUNDS = 4
@@ -114,7 +127,7 @@ def _pairs(L: _Level, heads: np.ndarray):
     return h[keep], j[keep]
 
 
-def _candidates(L: _Level, V, Q, rules, scale2, top=1):
+def _candidates(L: _Level, V, Q, rules, scale2, top=1, area=None):
     """The valid half-edge collapses and their costs ``(heads, cost)``, among each vertex's
     ``top`` cheapest targets (all of them when ``top`` is None)."""
     n = L.deg.size
@@ -160,6 +173,12 @@ def _candidates(L: _Level, V, Q, rules, scale2, top=1):
     flat = _orient(zh, z0, z1)
     zs = np.abs(zh).sum(1) + np.abs(z0).sum(1) + np.abs(z1).sum(1)
     good = flat > 1e-12 * zs * zs
+    if area is not None:
+        # The input area each new face would hold (the ring's held area spread evenly over
+        # the flattened ring) at most `most`.
+        ring_held, most = area
+        old_flat = np.bincount(u, weights=_orient(np.zeros_like(L.z), L.z, L.z[L.nxt]), minlength=n)
+        good &= ring_held[uu] * flat <= most * np.maximum(old_flat[uu], 1e-300)
     Vu, Vw, Va, Vb = V[uu], V[ww], V[a], V[b]
     old = np.cross(Va - Vu, Vb - Vu)
     new = np.cross(Va - Vw, Vb - Vw)
@@ -288,13 +307,15 @@ def _collapse(L: _Level, V, F, alive_f, Q, dead, pf, pb, chosen, face_ptr, face_
     dead[u] = True
 
 
-def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, verbose=None):
+def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, area_cap=None, verbose=None):
     """Decimate a closed manifold mesh to ``base_faces`` faces and map its vertices onto the
     result (MAPS).
 
     **Arguments:** ``V (n, 3)`` positions, ``F (m, 3)`` faces of a closed, oriented,
     connected mesh; ``base_faces`` the faces wanted (even, at least the fewest its genus
-    allows); ``verbose`` the progress bar (default: the library's switch).
+    allows); ``area_cap`` ``None`` or ``(factor, doublings, reset)``, a bound on the input
+    area a base face may hold (see :data:`AREA_CAPS`); ``verbose`` the progress bar (default:
+    the library's switch).
 
     **Returns:** ``(kept (n0,), base_faces (base_faces, 3), vertex_face (n,), vertex_bary
     (n, 3), history)``: the surviving vertices (increasing indices into ``V``), the base
@@ -318,16 +339,34 @@ def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, verbose=None
     faces_left = m
     level_rules = 0
     levels: list = []
+    factor, doublings, reset = area_cap if area_cap is not None else (np.inf, 0, -1)
+    cap_step = 0 if area_cap is not None else -1
+    if area_cap is not None:                       # input area per vertex; mean base face's
+        A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+        va = np.bincount(F.ravel(), np.repeat(A / 3, 3), minlength=n)
+        target = va.sum() / base_faces
     with progress(total=(m - base_faces) // 2, desc="decimation", unit="collapse", verbose=verbose) as bar:
         while faces_left > base_faces:
             slots = np.flatnonzero(alive_f)
             L = _Level(V, F, slots, n)
-            heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2)
+            area = None
+            if cap_step >= 0:                      # input area held by each vertex's ring
+                held = np.bincount(pf, va, minlength=m)
+                area = (np.bincount(L.row, weights=held[L.face], minlength=n),
+                        factor * 2.0 ** cap_step * target)
+            heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2, area=area)
             if not heads.size:
-                heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2, top=None)
+                heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2, top=None, area=area)
             if not heads.size:
+                if 0 <= cap_step < doublings:
+                    cap_step += 1
+                    continue
                 if level_rules + 1 < len(_RULES):
                     level_rules += 1
+                    cap_step = min(cap_step, reset)
+                    continue
+                if cap_step >= 0:                  # the cap goes last
+                    cap_step = -1
                     continue
                 raise SolverError(f"manifold_map: decimation stopped at {faces_left} faces: no "
                                   "collapse keeps the topology and a one-to-one map; ask for more "
