@@ -387,3 +387,28 @@ def test_the_area_cap_keeps_base_faces_from_holding_a_large_share_of_the_surface
     assert _largest_share(V, F, free[2], 100) > 0.08
     assert _largest_share(V, F, capped[2], 100) < 0.03
 
+
+def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
+    # With several area caps, the base domain kept is the one whose default remesh the
+    # estimate finds closest to the input; above SELECT_MAX_FACES, the first cap's.
+    from jaxparam.manifold import parameterization as P
+    from jaxparam.manifold.relax import estimated_distance, sharpest_vertices
+    mesh = plate(2, n=4)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces, np.int64)
+    caps = (None, (1.0, 0, 0))
+    sharp = sharpest_vertices(V, F)
+    params, errs = [], []
+    for c in caps:
+        monkeypatch.setattr(P, "AREA_CAPS", (c,))
+        params.append(manifold_map(mesh, 40, verbose=False)[1])
+        X = np.asarray(params[-1].remesh(P.SELECT_LEVEL).mesh.vertices)
+        errs.append(estimated_distance(V, F, sharp, X, params[-1].remesh(P.SELECT_LEVEL).mesh.faces))
+    assert not np.array_equal(params[0].base_vertices, params[1].base_vertices)
+    monkeypatch.setattr(P, "AREA_CAPS", caps)
+    _, param = manifold_map(mesh, 40, verbose=False)
+    want = params[int(np.argmin(errs))]
+    assert np.array_equal(param.base_vertices, want.base_vertices)
+    assert np.array_equal(param.base_faces, want.base_faces)
+    monkeypatch.setattr(P, "SELECT_MAX_FACES", 0)
+    _, param = manifold_map(mesh, 40, verbose=False)
+    assert np.array_equal(param.base_vertices, params[0].base_vertices)

@@ -18,7 +18,7 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .maps import maps_decimate
+from .maps import AREA_CAPS, maps_decimate
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
                     relax_samples, sharpest_vertices)
@@ -350,6 +350,22 @@ class ManifoldParameterization:
 
 METHODS = ("maps", "paths")
 
+#: Inputs of at most this many faces get one base domain per cap of
+#: :data:`~jaxparam.manifold.maps.AREA_CAPS` and keep the one whose default level
+#: :data:`SELECT_LEVEL` remesh (relaxed, as ``param.remesh`` makes it)
+#: :func:`~jaxparam.manifold.relax.estimated_distance` finds closest to the input; larger
+#: ones get the first cap only (each extra domain costs a decimation and a remesh: this keeps
+#: a 100k-face mesh within its time budget).  Why a choice and not one rule: the Hausdorff
+#: distance turns on whether a crease or tip keeps a base vertex, and no cap wins everywhere
+#: (level 4, 100 base faces, % of the diagonal, no cap / (1.5, 3, 1) / (1.5, 2, 0): bunny
+#: 0.78 / 0.56 / 0.48, cow 0.85 / 0.69 / 0.83, decimated-knight 0.94 / 1.24 / 0.71, bunny
+#: decimated 0.36 / 0.37 / 0.63; benchmarks/README.md).  The estimate of the *plain* remesh
+#: chose worse than this one: the relaxation reorders the candidates.
+SELECT_MAX_FACES = 30_000
+SELECT_LEVEL = 4
+
+
+
 
 def fewest_faces(genus: int) -> int:
     """The fewest base faces :func:`manifold_map` accepts for a closed surface of ``genus``:
@@ -370,7 +386,10 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     base domain ``T^0`` (even; at least :func:`fewest_faces`: ``4`` for genus 0 and
     ``14 g + 10`` for genus ``g >= 1``; fewer than the mesh's faces); ``method`` the
     route: ``"maps"`` (default: the map is built during the decimation, MAPS, Lee et al.
-    1998, so it never gets blocked) or ``"paths"`` (surface edges traced along the mesh's
+    1998, so it never gets blocked; on inputs of at most :data:`SELECT_MAX_FACES` faces it
+    decimates once per area cap of :data:`~jaxparam.manifold.maps.AREA_CAPS` and keeps the
+    base domain whose remesh is estimated closest to the input) or ``"paths"`` (surface
+    edges traced along the mesh's
     edges, Floater, Hormann and Reimers, with refinement when blocked; can fail with a
     :class:`SolverError`); ``weights`` the convex-combination weights inside the surface
     triangles (``"paths"`` only); ``verbose`` the progress bars (default: the library's
@@ -444,9 +463,29 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
 
 
 def _maps_route(mesh: TriMesh, base_faces: int, verbose):
-    """:func:`manifold_map` with ``method="maps"``."""
+    """:func:`manifold_map` with ``method="maps"``: one base domain per area cap (the first
+    only above :data:`SELECT_MAX_FACES` faces), the one whose default level
+    :data:`SELECT_LEVEL` remesh is estimated closest to the input kept."""
     V = np.asarray(mesh.vertices, np.float64)
-    kept, F0, vface, vbary, history = maps_decimate(V, mesh.faces, base_faces, verbose=verbose)
+    Fm = np.asarray(mesh.faces, np.int64)
+    caps = AREA_CAPS if mesh.n_faces <= SELECT_MAX_FACES else AREA_CAPS[:1]
+    best, sharp = None, None
+    for cap in caps:
+        out = _maps_param(mesh, V, maps_decimate(V, Fm, base_faces, area_cap=cap, verbose=verbose))
+        if len(caps) == 1:
+            return out
+        if sharp is None:
+            sharp = sharpest_vertices(V, Fm)
+        semi = out[1].remesh(SELECT_LEVEL)
+        err = estimated_distance(V, Fm, sharp, np.asarray(semi.mesh.vertices), semi.mesh.faces)
+        if best is None or err < best[0]:
+            best = (err, out)
+    return best[1]
+
+
+def _maps_param(mesh: TriMesh, V: np.ndarray, decimated):
+    """``(base, param)`` of a MAPS decimation's result ``decimated``."""
+    kept, F0, vface, vbary, history = decimated
     base_topo = topo.build(F0, kept.size, where="manifold_map")
     if base_topo.genus != mesh.topology.genus:          # the link condition prevents it
         raise SolverError(f"manifold_map: the base domain has genus {base_topo.genus}, the mesh "
