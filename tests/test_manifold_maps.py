@@ -232,15 +232,17 @@ def test_every_closed_mesh_of_shared_data_at_every_base_count(name, nb):
 
 @pytest.mark.slow
 @pytest.mark.data
-@pytest.mark.parametrize("name, bound", [("bunny.off", 0.01), ("3holes.off", 0.01), ("rocker-arm.obj", 0.01),
-                                         ("cow.off", 0.0105), ("decimated-knight.off", 0.0105)])
+@pytest.mark.parametrize("name, bound", [("bunny.off", 0.0065), ("3holes.off", 0.004), ("rocker-arm.obj", 0.0065),
+                                         ("cow.off", 0.0085), ("decimated-knight.off", 0.0085)])
 def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_faces(name, bound):
     """Measured 0.72 %, 0.27 %, 0.63 %, 0.85 %, 0.94 % (Hausdorff both ways, bounding-box
     diagonal) with the samples relaxed across base edges, and at the finest level too where
     that is estimated closer (cow, decimated-knight; 1.00 and 1.09 % with the level-3
     relaxation only; 0.83, 0.34, 0.70, 1.30, 1.19 % without any; cow and decimated-knight were 4.6 % and 10.2 % before the decimation's rules
     were relaxed step by step, which keeps the tips of thin parts in the base domain).  The
-    issue's goal is 0.5 % on every mesh; this is a regression guard."""
+    issue's goal is 0.5 % on every mesh; this is a regression guard.  With the base domain
+    chosen among three area caps (session 10; 50,000 samples): 0.48 %, 0.26 %, 0.48 %, 0.69 %,
+    0.71 %."""
     mesh = jp.load(data_path("meshes", name))
     base, param = manifold_map(mesh, 100)
     rep = param.report(4, samples=20_000)
