@@ -8,6 +8,8 @@ norms are "safe" (the double-``where`` trick) so a degenerate triangle gives
 """
 from __future__ import annotations
 
+import functools
+
 from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 
 from . import tol
@@ -29,11 +31,30 @@ def dot(a, b):
 
     XLA's CPU backend hands a ``reduce`` over a short minor axis to its YNNPACK fusions, which
     run it several times slower than the elementwise sum (and sum in another order); written
-    out, the sum fuses with its neighbours (issue 17)."""
+    out, the sum fuses with its neighbours (issue 17).  Its derivative (a ``jax.custom_jvp``) is
+    ``sum(da * b + a * db, -1)``: reverse mode transposes that into broadcast products, where
+    the written-out sum's transpose would pad each coordinate into a copy of ``a``."""
+    return _dot()(a, b)
+
+
+@functools.cache
+def _dot():
+    f = jax.custom_jvp(_dot_primal)
+    f.defjvp(_dot_jvp)
+    return f
+
+
+def _dot_primal(a, b):
     out = a[..., 0] * b[..., 0]
     for i in range(1, a.shape[-1]):
         out = out + a[..., i] * b[..., i]
     return out
+
+
+def _dot_jvp(primals, tangents):
+    a, b = primals
+    da, db = tangents
+    return _dot_primal(a, b), jnp.sum(da * b + a * db, -1)
 
 
 def safe_norm(x, axis=-1):
