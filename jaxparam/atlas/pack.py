@@ -363,6 +363,17 @@ def fill_square(masks, size: int, margin: int, order: np.ndarray | None = None):
     then leftmost free position over its four proper turns (bottom-left fill), at least
     ``margin`` cells apart.  **Returns:** ``None`` if one does not fit, else
     ``(positions (c, 2) cells [u, v], turn (c,) int, size)``."""
+    def lowest(turns, occb, size):
+        best = _inside(turns, occb, size, size)
+        return best if best is not None else _lowest_free(turns, occb, size)
+
+    return _fill(masks, size, margin, order, lowest)
+
+
+def _fill(masks, size: int, margin: int, order, place):
+    """The placement loop of :func:`fill_square` and :func:`fill_contact`: masks in ``order``
+    (default largest first), each where ``place(turns, occupied, size)`` puts it (``(key,
+    turn, i, j, mask)`` or ``None``), then painted with its margin."""
     occb = np.zeros((size, size), bool)
     st = np.ones((2 * margin + 1, 2 * margin + 1), bool) if margin else None
     pos = np.zeros((len(masks), 2), np.int64)
@@ -372,10 +383,7 @@ def fill_square(masks, size: int, margin: int, order: np.ndarray | None = None):
     for c in order:
         if min(masks[c].shape) > size:
             return None
-        turns = _turns(masks[c])
-        best = _inside(turns, occb, size, size)
-        if best is None:
-            best = _lowest_free(turns, occb, size)
+        best = place(_turns(masks[c]), occb, size)
         if best is None:
             return None
         _, t, i, j, M = best
@@ -428,23 +436,7 @@ def fill_contact(masks, size: int, margin: int, order: np.ndarray | None = None)
     (session 10, same charts, with both tried at each scale: bunny 66.0 -> 70.3 %,
     decimated-knight 70.3 -> 71.3 %, 3holes 69.5 -> 70.0 %).  **Returns:** ``None`` if one
     does not fit, else ``(positions (c, 2) cells [u, v], turn (c,) int, size)``."""
-    occb = np.zeros((size, size), bool)
-    st = np.ones((2 * margin + 1, 2 * margin + 1), bool) if margin else None
-    pos = np.zeros((len(masks), 2), np.int64)
-    turn = np.zeros(len(masks), np.int64)
-    if order is None:
-        order = np.argsort([-m.sum() for m in masks], kind="stable")
-    for c in order:
-        if min(masks[c].shape) > size:
-            return None
-        best = _most_contact(_turns(masks[c]), occb, size)
-        if best is None:
-            return None
-        _, t, i, j, M = best
-        _paint(occb, M, i, j, margin, st)
-        pos[c] = (i, j)
-        turn[c] = t
-    return pos, turn, size
+    return _fill(masks, size, margin, order, _most_contact)
 
 
 def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 1024,
