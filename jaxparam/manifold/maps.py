@@ -31,6 +31,7 @@ import numpy as np
 
 from .. import topology as topo
 from ..errors import SolverError
+from ..host import face_areas
 from ..progress import progress
 from .decimate import plane_quadrics
 
@@ -342,7 +343,7 @@ def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, area_cap=Non
     factor, doublings, reset = area_cap if area_cap is not None else (np.inf, 0, -1)
     cap_step = 0 if area_cap is not None else -1
     if area_cap is not None:                       # input area per vertex; mean base face's
-        A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+        A = face_areas(V, F)
         va = np.bincount(F.ravel(), np.repeat(A / 3, 3), minlength=n)
         target = va.sum() / base_faces
     with progress(total=(m - base_faces) // 2, desc="decimation", unit="collapse", verbose=verbose) as bar:
