@@ -21,6 +21,14 @@
     (:mod:`jaxparam.optimize.padding`).  Off, every new size compiles again; results agree
     either way to rounding.
 
+``jp.config.keep_freed_mb``
+    How much freed memory the process keeps for reuse, in MiB (default 512; ``JAXPARAM_KEEP_FREED_MB``
+    sets the default, ``0`` leaves glibc's own limits).  With glibc, blocks of up to that size come
+    from the heap and up to that much freed memory stays in the process: XLA's buffer for a
+    compiled call's temporaries is then not page-faulted in again on every call (the meshless
+    map's gradient on 126k fan entries: 40 % faster; :mod:`jaxparam.memory`).  Applied when JAX
+    loads and whenever it is set; elsewhere than glibc it does nothing.
+
 ``import jaxparam`` does not import JAX (issue 17): :func:`configure_jax` (float64 and the
 compilation cache) runs the moment JAX loads, whoever imports it, through
 :func:`jaxparam.lazy_jax.when_jax_loads`.
@@ -30,12 +38,15 @@ This module imports only :mod:`jaxparam.lazy_jax` (no JAX), so every layer may r
 """
 from __future__ import annotations
 
+import operator
 import os
+import warnings
 from pathlib import Path
 
 from .lazy_jax import jax_loaded
 
-__all__ = ["Settings", "config", "env_flag", "default_compile_cache", "configure_jax"]
+__all__ = ["Settings", "config", "env_flag", "default_compile_cache", "default_keep_freed_mb",
+           "configure_jax"]
 
 _FALSE = {"0", "false", "no", "off", ""}
 
@@ -56,12 +67,13 @@ class Settings:
     ``AttributeError`` naming the known ones, so a typo is not silently ignored.
     """
 
-    __slots__ = ("_progress", "_compile_cache", "_buckets")
+    __slots__ = ("_progress", "_compile_cache", "_buckets", "_keep_freed_mb")
 
     def __init__(self) -> None:
         self._progress: bool | None = None
         self._buckets: bool | None = None
         self._compile_cache: str | None = default_compile_cache()
+        self._keep_freed_mb: int = default_keep_freed_mb()
 
     @property
     def progress(self) -> bool:
@@ -114,6 +126,28 @@ class Settings:
         except (AttributeError, KeyError):  # an old JAX without these options: run uncached
             pass
 
+    @property
+    def keep_freed_mb(self) -> int:
+        """MiB of freed memory kept in the process for reuse (glibc; see the module docstring)."""
+        return self._keep_freed_mb
+
+    @keep_freed_mb.setter
+    def keep_freed_mb(self, mb: int) -> None:
+        from . import memory
+
+        try:
+            if isinstance(mb, bool):
+                raise TypeError
+            mb = operator.index(mb)
+        except TypeError:
+            raise ValueError(f"jp.config.keep_freed_mb must be a whole number of MiB, got {mb!r}.") from None
+        if not 0 <= mb <= memory.MAX_KEEP_MB:
+            raise ValueError(f"jp.config.keep_freed_mb must be in [0, {memory.MAX_KEEP_MB}] MiB, "
+                             f"got {mb}.")
+        self._keep_freed_mb = mb
+        if jax_loaded():
+            memory.keep_freed(mb)
+
     def __setattr__(self, name, value):
         if name not in Settings.__slots__ and not isinstance(getattr(Settings, name, None), property):
             known = [n for n, v in vars(Settings).items() if isinstance(v, property)]
@@ -122,7 +156,7 @@ class Settings:
 
     def __repr__(self) -> str:
         return (f"jp.config(progress={self.progress}, buckets={self.buckets}, "
-                f"compile_cache={self.compile_cache!r})")
+                f"compile_cache={self.compile_cache!r}, keep_freed_mb={self.keep_freed_mb})")
 
 
 def default_compile_cache() -> str | None:
@@ -136,12 +170,33 @@ def default_compile_cache() -> str | None:
     return str(Path(base) / "jaxparam" / "jax")
 
 
+def default_keep_freed_mb() -> int:
+    """``$JAXPARAM_KEEP_FREED_MB`` (a whole number of MiB, 0 to 2047) or 512; another value is
+    ignored with a warning that names the variable (a setting must not stop the import)."""
+    value = os.environ.get("JAXPARAM_KEEP_FREED_MB")
+    if value is None or not value.strip():
+        return 512
+    try:
+        mb = int(value.strip())
+        if 0 <= mb <= 2047:
+            return mb
+    except ValueError:
+        pass
+    warnings.warn(f"JAXPARAM_KEEP_FREED_MB must be a whole number of MiB in [0, 2047] (0: glibc's "
+                  f"own limits), got {value!r}; using 512.", stacklevel=2)
+    return 512
+
+
 #: The one settings object of the library, exported as ``jp.config``.
 config = Settings()
 
 
 def configure_jax(jax) -> None:
     """What ``import jaxparam`` sets in JAX: float64 (``jax_enable_x64``) and the persistent
-    compilation cache (:attr:`Settings.compile_cache`)."""
+    compilation cache (:attr:`Settings.compile_cache`); and, for XLA's buffers, the freed
+    memory kept for reuse (:attr:`Settings.keep_freed_mb`)."""
+    from . import memory
+
     jax.config.update("jax_enable_x64", True)
     config.apply_compile_cache()
+    memory.keep_freed(config.keep_freed_mb)

@@ -1,4 +1,5 @@
-"""The freed-memory reuse around large computations (jaxparam.memory)."""
+"""The freed-memory reuse (jaxparam.memory): process-wide (jp.config.keep_freed_mb) and around
+large computations."""
 import ctypes
 import resource
 
@@ -26,9 +27,60 @@ def faults_of_second_allocation(nbytes=64 << 20):
     return faults
 
 
-def test_freed_blocks_are_reused_inside_and_returned_outside():
+@pytest.fixture
+def glibc_limits():
+    """glibc's largest dynamic limits during the test (a 64 MiB block is mmapped), then
+    jp.config's setting back."""
+    import jaxparam as jp
+
+    memory.keep_freed(512)            # so that 0 below sets the limits, not "leave alone"
+    memory.keep_freed(0)
+    yield
+    memory.keep_freed(jp.config.keep_freed_mb)
+
+
+def test_keep_freed_keeps_blocks_up_to_its_size(glibc_limits):
+    import jaxparam as jp
+
     pages = (64 << 20) // 4096
-    assert faults_of_second_allocation() > pages // 2        # glibc's default: mmap per block
+    assert faults_of_second_allocation() > pages // 2        # above 32 MiB: mmap per block
+    assert memory.keep_freed(128)
+    faults_of_second_allocation()                            # grows the heap once
+    assert faults_of_second_allocation() < pages // 10       # then the freed block is reused
+    assert faults_of_second_allocation(256 << 20) > (256 << 20) // 4096 // 2   # above 128 MiB
+    with pytest.raises(ValueError, match=r"\[0, 2047\]"):
+        memory.keep_freed(4096)
+    jp.config.keep_freed_mb = 64 + 1                         # the setting applies at once
+    assert faults_of_second_allocation() < pages // 10
+    with pytest.raises(ValueError, match="whole number of MiB"):
+        jp.config.keep_freed_mb = "a lot"
+    with pytest.raises(ValueError, match=r"\[0, 2047\]"):
+        jp.config.keep_freed_mb = -1
+    jp.config.keep_freed_mb = 512
+
+
+def test_reuse_inside_ends_at_the_process_wide_setting(glibc_limits):
+    memory.keep_freed(128)
+    pages = (64 << 20) // 4096
+    with memory.reuse_freed_memory(10**6):
+        assert faults_of_second_allocation() < pages // 10
+    faults_of_second_allocation()
+    assert faults_of_second_allocation() < pages // 10       # 128 MiB kept, not glibc's limits
+
+
+def test_bad_environment_value_warns_and_keeps_the_default(monkeypatch):
+    from jaxparam import settings
+
+    monkeypatch.setenv("JAXPARAM_KEEP_FREED_MB", "lots")
+    with pytest.warns(UserWarning, match="JAXPARAM_KEEP_FREED_MB"):
+        assert settings.default_keep_freed_mb() == 512
+    monkeypatch.setenv("JAXPARAM_KEEP_FREED_MB", "0")
+    assert settings.default_keep_freed_mb() == 0
+
+
+def test_freed_blocks_are_reused_inside_and_returned_outside(glibc_limits):
+    pages = (64 << 20) // 4096
+    assert faults_of_second_allocation() > pages // 2        # glibc's limits: mmap per block
     with memory.reuse_freed_memory(10**6):
         faults_of_second_allocation()                        # grows the heap once
         assert faults_of_second_allocation() < pages // 10
@@ -38,7 +90,7 @@ def test_freed_blocks_are_reused_inside_and_returned_outside():
     assert faults_of_second_allocation() > pages // 2        # restored
 
 
-def test_small_problems_change_nothing():
+def test_small_problems_change_nothing(glibc_limits):
     pages = (64 << 20) // 4096
     with memory.reuse_freed_memory(memory.MIN_SIZE - 1):
         assert faults_of_second_allocation() > pages // 2
