@@ -372,6 +372,22 @@ def test_obj_faces_may_refer_to_vertices_defined_further_down(tmp_path):
         jp.load(p)
 
 
+def test_obj_backslash_continues_a_line(tmp_path):
+    # Found in QA: the OBJ format's line continuation (a backslash at the end of a line, read
+    # by libigl and trimesh) was refused as "cannot read a coordinate from '\\'".
+    p = tmp_path / "continued.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 \\\n 0\nv 1 1 0\nf 1 2 3\nf 2 4 \\\n3\n")
+    mesh = jp.load(p)
+    assert mesh.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]
+    assert mesh.faces.tolist() == [[0, 1, 2], [1, 3, 2]]
+    trimesh = pytest.importorskip("trimesh")            # the oracle reads the same
+    other = trimesh.load(p, process=False)
+    assert np.array_equal(other.vertices, mesh.vertices) and np.array_equal(other.faces, mesh.faces)
+    p.write_text("v 0 0 0\nv 1 0 \\\n x\nv 0 1 0\nf 1 2 3\n")   # errors name the first line
+    with pytest.raises(MeshFileError, match=r"line 2: cannot read a coordinate from 'x'"):
+        jp.load(p)
+
+
 def test_a_utf8_byte_order_mark_is_not_part_of_the_first_line(tmp_path):
     # Found in QA: an OBJ saved by a Windows editor (BOM first) lost its first 'v' line without
     # a word (tag '\ufeffv' unknown), shifting every index; an .xyz's first point was refused.

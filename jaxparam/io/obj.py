@@ -33,6 +33,23 @@ def read_number_fields(tokens, count: int, path, line_no: int, what: str, too_fe
     return [_number(t, path, line_no, what) for t in tokens[:count]]
 
 
+def logical_lines(text: str):
+    """``(line number, line)`` of an OBJ text, a line ending in a backslash joined with the
+    next (the format's line continuation, as libigl and trimesh read it); the number is that
+    of the first physical line."""
+    start, parts = None, []
+    for line_no, raw in enumerate(text.splitlines(), 1):
+        stripped = raw.rstrip()
+        if stripped.endswith("\\") and "#" not in stripped:
+            start = line_no if start is None else start
+            parts.append(stripped[:-1])
+            continue
+        yield (line_no if start is None else start), " ".join(parts + [raw])
+        start, parts = None, []
+    if parts:
+        yield start, " ".join(parts)
+
+
 def parse_obj(path):
     """An OBJ file's data in file order: ``(vertices (n, 3), faces (m, 3), vt (t, 2) or None,
     uv_faces (m, 3) or None, dropped)``; polygons split into triangle fans.  ``uv_faces`` are
@@ -40,7 +57,7 @@ def parse_obj(path):
     ``vt`` in a file that has some (their UVs cannot be kept)."""
     verts, tex, faces, ftex, face_lines = [], [], [], [], []
     text = read_text(path)
-    for line_no, raw in enumerate(text.splitlines(), 1):
+    for line_no, raw in logical_lines(text):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
