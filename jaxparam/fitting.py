@@ -140,6 +140,18 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     if not hasattr(mesh_or_points, "shape"):
         mesh_or_points = as_mesh(mesh_or_points, "fit_surface")
     kind = choose(kind, KINDS, what="kind", where="fit_surface")
+    if hasattr(uv, "uv_faces") and hasattr(uv, "chart"):
+        raise MeshError("fit_surface: got an Atlas, whose charts lie side by side in [0, 1]^2 with "
+                        "UVs per face corner; a surface is fitted over one chart, uv of shape "
+                        "(N, 2) with one parameter per point (e.g. jp.convex_map(mesh) of a disk). "
+                        "Fit one chart at a time: the faces where atlas.chart == c, with their "
+                        "vertices' UVs from atlas.uv[atlas.uv_faces].")
+    if not isinstance(uv, jax.core.Tracer):
+        try:
+            np.asarray(uv, np.float64)
+        except (TypeError, ValueError):
+            raise MeshError(f"fit_surface: uv must be an (N, 2) array of parameters, got "
+                            f"{type(uv).__name__}.") from None
     X_in = mesh_or_points.vertices if isinstance(mesh_or_points, TriMesh) else mesh_or_points
     Uc = concrete_values(uv)
     if Uc is None:

@@ -47,6 +47,19 @@ def test_fit_errors(mesh_uv):
         jp.fit_surface(mesh, uv, kind="nurbs")
     with pytest.raises(jp.MeshError, match=r"uv must have shape"):
         jp.fit_surface(mesh, uv[:5])
+    # Found in QA: a non-array uv crashed inside NumPy (TypeError), not with the library's error.
+    with pytest.raises(jp.MeshError, match=r"uv must be an \(N, 2\) array of parameters, got str"):
+        jp.fit_surface(mesh, "uv.txt")
+
+
+def test_an_atlas_is_refused_with_what_to_do_instead():
+    # Found in QA: fit_surface(mesh, atlas) crashed with a TypeError; an atlas's charts lie side
+    # by side, so one surface over its square is meaningless: fit one chart at a time.
+    torus = jp.shapes.torus(16, 8)
+    atlas = jp.atlas(torus)
+    assert atlas.stats.charts > 1
+    with pytest.raises(jp.MeshError, match=r"got an Atlas.*Fit one chart at a time"):
+        jp.fit_surface(torus, atlas)
 
 
 def test_unused_vertices_do_not_enter_the_fit(mesh_uv):
