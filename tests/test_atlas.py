@@ -600,3 +600,24 @@ def test_energies_with_no_free_minimum_are_refused(energy):
     # stretch map without bound; a chart's map has a free boundary.
     with pytest.raises(jp.MeshError, match=f"energy '{energy}' with a chart's free boundary"):
         jp.atlas(jp.shapes.sphere(1), energy=energy)
+
+
+def test_turned_correlations_match_direct_ones():
+    """pack._correlations takes the 180-degree turns' correlations from the unturned masks'
+    spectra (convolutions): every valid position must hold the direct correlation's count."""
+    from scipy import signal
+
+    rng = np.random.default_rng(7)
+    occ = (rng.random((61, 61)) < 0.3).astype(np.float32)
+    shape = (64, 64)
+    F_occ = np.fft.rfft2(occ, shape)
+    M = rng.random((9, 5)) < 0.6
+    turns = [t[0] for t in pack._turns(M)]
+    got = pack._correlations(F_occ, turns, shape)
+    for T, g in zip(turns, got):
+        h, w = T.shape
+        want = signal.correlate(occ, T.astype(np.float32), mode="valid")   # (61-h+1, 61-w+1)
+        np.testing.assert_allclose(g[:want.shape[0], :want.shape[1]], want, atol=1e-3)
+    skipped = pack._correlations(F_occ, [None, turns[1], None, turns[3]], shape)
+    assert skipped[0] is None and skipped[2] is None
+    np.testing.assert_allclose(skipped[3], got[3], atol=1e-3)

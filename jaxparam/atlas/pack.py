@@ -202,6 +202,33 @@ def _turns(M):
             (np.rot90(M, 1), np.array([[0.0, 1.0], [-1.0, 0.0]]), (0.0, w)))     # (v, w - u)
 
 
+def _correlations(F_occ, masks, shape):
+    """``corr[t][j, i] = sum_{y, x} occ[j + y, i + x] masks[t][y, x]`` for the four turns'
+    masks (``None`` to skip one), from the occupancy's spectrum ``F_occ`` (an ``rfft2`` at
+    ``shape``).  Turns 2 and 3 are turns 0 and 1 rotated by 180 degrees (:func:`_turns`), so
+    their correlations are the unturned masks' convolutions, read ``(h - 1, w - 1)`` further
+    on: two mask spectra instead of four (the FFTs are most of the packing's time).  Each
+    result is valid where ``j <= shape[0] - h`` and ``i <= shape[1] - w``, which is every
+    position the callers read (float32 sums of 0/1 cells: within 1e-2 of an integer)."""
+    from scipy import fft
+
+    spectra, out = {}, []
+    for t, M in enumerate(masks):
+        if M is None:
+            out.append(None)
+            continue
+        base = t % 2
+        if base not in spectra:
+            src = M if t < 2 else M[::-1, ::-1]
+            spectra[base] = fft.rfft2(src.astype(np.float32), shape)
+        if t < 2:
+            out.append(fft.irfft2(F_occ * np.conj(spectra[base]), shape))
+        else:
+            h, w = M.shape
+            out.append(fft.irfft2(F_occ * spectra[base], shape)[h - 1:, w - 1:])
+    return out
+
+
 def _inside(turns, occb, W, H, samples: int = 24, chunk: int = 512, chunks: int = 8):
     """The lowest, then leftmost free position inside the current bounding rectangle
     ``W x H`` over the turns, or ``None`` (then :func:`_anywhere` searches).
@@ -265,12 +292,13 @@ def _anywhere(turns, occ, W, H, cap, margin):
     shape = (fft.next_fast_len(R, True), fft.next_fast_len(C, True))
     F_occ = fft.rfft2(occ[:R, :C], shape)
     best = None
-    for t, (M, _, _) in enumerate(turns):
-        h, w = M.shape
-        if not M.any():
+    masks = [M if M.any() else None for M, _, _ in turns]
+    for t, ov in enumerate(_correlations(F_occ, masks, shape)):
+        if ov is None:
             continue
+        M = masks[t]
+        h, w = M.shape
         jm, im = min(H + margin, cap - h), min(W + margin, cap - w)
-        ov = fft.irfft2(F_occ * np.conj(fft.rfft2(M.astype(np.float32), shape)), shape)
         fj, fi = np.nonzero(ov[:jm + 1, :im + 1] < 0.5)
         if fj.size == 0:
             continue
@@ -344,11 +372,13 @@ def _lowest_free(turns, occb, size):
     shape = (fft.next_fast_len(size, True),) * 2
     F_occ = fft.rfft2(occb[:size, :size].astype(np.float32), shape)
     best = None
-    for t, (M, _, _) in enumerate(turns):
-        h, w = M.shape
-        if h > size or w > size or not M.any():
+    masks = [None if M.shape[0] > size or M.shape[1] > size or not M.any() else M
+             for M, _, _ in turns]
+    for t, ov in enumerate(_correlations(F_occ, masks, shape)):
+        if ov is None:
             continue
-        ov = fft.irfft2(F_occ * np.conj(fft.rfft2(M.astype(np.float32), shape)), shape)
+        M = masks[t]
+        h, w = M.shape
         free = ov[:size - h + 1, :size - w + 1] < 0.5
         if free.any():
             j, i = np.unravel_index(int(np.argmax(free)), free.shape)
@@ -406,17 +436,26 @@ def _most_contact(turns, occb, size, keep: int = 8):
     shape = (fft.next_fast_len(size + 2, True),) * 2
     F_occ = fft.rfft2(O, shape)
     cands = []
-    for t, (M, _, _) in enumerate(turns):
-        h, w = M.shape
-        if h > size or w > size or not M.any():
+    # at (j, i) in O: M at (j, i) in occb; the ring of a turn is the turned ring
+    fits = [M.shape[0] <= size and M.shape[1] <= size and M.any() for M, _, _ in turns]
+    pads = [np.pad(M, 1) if ok else None for (M, _, _), ok in zip(turns, fits)]
+    ovs = _correlations(F_occ, pads, shape)
+    rings = [None] * 4
+    for t, ov in enumerate(ovs):
+        if ov is None:
             continue
-        Mp = np.pad(M, 1)                                  # at (j, i) in O: M at (j, i) in occb
-        ring = ndimage.binary_dilation(Mp, np.ones((3, 3), bool)) & ~Mp
-        ov = fft.irfft2(F_occ * np.conj(fft.rfft2(Mp.astype(np.float32), shape)), shape)
+        M = turns[t][0]
+        h, w = M.shape
         fj, fi = np.nonzero(ov[:size - h + 1, :size - w + 1] < 0.5)
         if fj.size == 0:
             continue
-        ct = fft.irfft2(F_occ * np.conj(fft.rfft2(ring.astype(np.float32), shape)), shape)
+        rings[t] = (fj, fi, ndimage.binary_dilation(pads[t], np.ones((3, 3), bool)) & ~pads[t])
+    cts = _correlations(F_occ, [r[2] if r is not None else None for r in rings], shape)
+    for t, ct in enumerate(cts):
+        if ct is None:
+            continue
+        fj, fi, _ = rings[t]
+        M = turns[t][0]
         key = -np.rint(ct[fj, fi]).astype(np.int64) * (1 << 24) + (fj << 12) + fi
         for b in np.argsort(key, kind="stable")[:keep]:
             cands.append((int(key[b]), t, int(fi[b]), int(fj[b]), M))
