@@ -66,6 +66,12 @@ def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
     H0 = hull_area(Q.reshape(-1, 2))
     if H0 <= 0 or faces.shape[0] < 2 * min_faces:
         return 0.0, None
+    # The two pieces' hulls hold at least the chart's own UV area, whatever the cut: a chart
+    # that fills more than `accept` of its hull has no cut to find, and skips the 272 hulls
+    # below (on cow, 22 of the 220 charts tried: 49k -> 43k hulls; the result is the same).
+    e1, e2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
+    if 0.5 * np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])) > accept * H0:
+        return 0.0, None
     C = Q.mean(1)                                                    # (f, 2) centroids
     cands = []
     for th in DIRECTIONS:
