@@ -414,3 +414,30 @@ def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
     monkeypatch.setattr(P, "SELECT_MAX_FACES", 0)
     _, param = manifold_map(mesh, 40, verbose=False)
     assert np.array_equal(param.base_vertices, params[0].base_vertices)
+
+
+def test_manifold_map_keeps_the_chosen_remesh_samples(monkeypatch):
+    # Issue 13: the level-SELECT_LEVEL samples the base domain was chosen by are kept, so
+    # param.remesh(SELECT_LEVEL) does not relax them again, and gives what recomputing gives
+    # (also for moved positions: the samples are held fixed like the point location).
+    from dataclasses import replace
+    from jaxparam.manifold import parameterization as P
+    mesh = plate(2, n=4)
+    _, param = manifold_map(mesh, 40, verbose=False)
+    assert [s[0] for s in param.structure.samples] == [P.SELECT_LEVEL]
+    fresh = replace(param, structure=replace(param.structure, samples=()))
+    want = fresh.remesh(P.SELECT_LEVEL)
+    V1 = np.asarray(mesh.vertices) * np.array([1.0, 1.2, 0.9])
+    moved = np.asarray(fresh.with_vertices(V1).remesh(P.SELECT_LEVEL).mesh.vertices)
+
+    def fail(*args, **kwargs):
+        raise AssertionError("the kept samples were relaxed again")
+
+    monkeypatch.setattr(P, "_relaxed_samples", fail)
+    for _ in range(2):
+        got = param.remesh(P.SELECT_LEVEL)
+        np.testing.assert_array_equal(np.asarray(got.mesh.vertices), np.asarray(want.mesh.vertices))
+        np.testing.assert_array_equal(np.asarray(got.mesh.faces), np.asarray(want.mesh.faces))
+    np.testing.assert_array_equal(np.asarray(param.with_vertices(V1).remesh(P.SELECT_LEVEL).mesh.vertices), moved)
+    with pytest.raises(AssertionError, match="relaxed again"):     # other levels: computed
+        param.remesh(P.SELECT_LEVEL - 1)
