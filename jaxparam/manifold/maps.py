@@ -397,6 +397,18 @@ class MapsHistory:
 
     def __init__(self, levels: tuple, base_slots: np.ndarray):
         self.levels, self.base_slots = levels, base_slots
+        # What every pull-back needs of each level, made once (issue 13: the remesh pulls
+        # points back about a dozen times): the surviving faces' slots and wedges, where each
+        # ring's wedges start, and the old wedges' corners, coordinate by coordinate, with
+        # their doubled signed areas (the same arithmetic as computing them per point).
+        self._levels = []
+        for f, which, survive, before, after in levels:
+            ptr = np.zeros(int(which.max()) + 2, np.int64)
+            np.cumsum(np.bincount(which, minlength=int(which.max()) + 1), out=ptr[1:])
+            T = [np.ascontiguousarray(before[:, c, d]) for c in range(3) for d in range(2)]
+            det = (T[2] - T[0]) * (T[5] - T[1]) - (T[3] - T[1]) * (T[4] - T[0])
+            self._levels.append((f, which, f[survive], np.flatnonzero(survive), after, ptr, T, det))
+        self._m = int(max(base_slots.max(), max((lv[0].max() for lv in levels), default=0))) + 1
 
     def pull_back(self, region: np.ndarray, bary: np.ndarray, *, verbose=None):
         """The input mesh face ``(k,)`` and barycentric coordinates ``(k, 3)`` of points of
@@ -405,33 +417,31 @@ class MapsHistory:
         piecewise-linear map of the flattened rings run backwards)."""
         slot = self.base_slots[np.asarray(region, np.int64)].copy()
         b = np.array(bary, np.float64)
-        m = int(max(self.base_slots.max(), max((lv[0].max() for lv in self.levels), default=0))) + 1
-        entry = np.full(m, -1, np.int64)                 # reset after each level (not refilled)
-        for f, which, survive, before, after in progress(reversed(self.levels), total=len(self.levels),
-                                                         desc="pull back", unit="level", verbose=verbose):
-            live = f[survive]
-            entry[live] = np.flatnonzero(survive)
+        entry = np.full(self._m, -1, np.int64)           # reset after each level (not refilled)
+        for f, which, live, live_at, after, ptr, T, det in progress(
+                reversed(self._levels), total=len(self._levels), desc="pull back", unit="level",
+                verbose=verbose):
+            entry[live] = live_at
             e = entry[slot]
             entry[live] = -1
             hit = np.flatnonzero(e >= 0)
             if not hit.size:
                 continue
-            q = np.einsum("kc,kcd->kd", b[hit], after[e[hit]])
+            eh = e[hit]
+            q = np.einsum("kc,kcd->kd", b[hit], after[eh])
             # Candidates: every old wedge of the same ring.
-            grp = which[e[hit]]
-            ptr = np.zeros(int(which.max()) + 2, np.int64)
-            np.cumsum(np.bincount(which, minlength=int(which.max()) + 1), out=ptr[1:])
+            grp = which[eh]
             cnt = ptr[grp + 1] - ptr[grp]
             starts = np.cumsum(cnt) - cnt
             pi = np.repeat(np.arange(hit.size), cnt)
             cj = np.repeat(ptr[grp], cnt) + (np.arange(cnt.sum()) - np.repeat(starts, cnt))
-            T = before[cj]
-            qq = q[pi]
-            det = _orient(T[:, 0], T[:, 1], T[:, 2])
-            l0 = _orient(qq, T[:, 1], T[:, 2]) / det
-            l1 = _orient(T[:, 0], qq, T[:, 2]) / det
-            bb = np.stack([l0, l1, 1.0 - l0 - l1], 1)
-            depth = bb.min(1)
+            x0, y0, x1, y1, x2, y2 = (t[cj] for t in T)
+            qx, qy = q[:, 0][pi], q[:, 1][pi]
+            dj = det[cj]
+            l0 = ((x1 - qx) * (y2 - qy) - (y1 - qy) * (x2 - qx)) / dj
+            l1 = ((qx - x0) * (y2 - y0) - (qy - y0) * (x2 - x0)) / dj
+            l2 = 1.0 - l0 - l1
+            depth = np.minimum(np.minimum(l0, l1), l2)
             # Each point's deepest old wedge (the first of equals; the first where all are nan),
             # per segment without sorting (a lexsort here was half the pull-back's time).
             top = np.fmax.reduceat(depth, starts)
@@ -439,7 +449,7 @@ class MapsHistory:
             head = starts.copy()
             first = np.concatenate([[True], pi[at][1:] != pi[at][:-1]])
             head[pi[at[first]]] = at[first]
-            nb = np.clip(bb[head], 0.0, None)
+            nb = np.clip(np.stack([l0[head], l1[head], l2[head]], 1), 0.0, None)
             slot[hit] = f[cj[head]]
             b[hit] = nb / nb.sum(1, keepdims=True)
         return slot, b
