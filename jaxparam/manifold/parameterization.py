@@ -19,7 +19,7 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .maps import AREA_CAPS, maps_decimate
+from .maps import AREA_CAPS, decimate_caps
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
                     relax_samples, sharpest_vertices)
@@ -503,8 +503,12 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     Fm = np.asarray(mesh.faces, np.int64)
     caps = AREA_CAPS if mesh.n_faces <= SELECT_MAX_FACES else AREA_CAPS[:1]
     best, sharp = None, None
-    for cap in caps:
-        out = _maps_param(mesh, V, maps_decimate(V, Fm, base_faces, area_cap=cap, verbose=verbose))
+    # The decimations run together while they make the same collapses (issue 13); each
+    # result is the one decimating with its cap alone gives, or the error it raises.
+    for decimated in decimate_caps(V, Fm, base_faces, caps, verbose=verbose):
+        if isinstance(decimated, SolverError):
+            raise decimated
+        out = _maps_param(mesh, V, decimated)
         if len(caps) == 1:
             return out
         if sharp is None:
