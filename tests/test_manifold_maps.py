@@ -414,3 +414,51 @@ def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
     monkeypatch.setattr(P, "SELECT_MAX_FACES", 0)
     _, param = manifold_map(mesh, 40, verbose=False)
     assert np.array_equal(param.base_vertices, params[0].base_vertices)
+
+
+def test_manifold_map_keeps_the_chosen_remesh_samples(monkeypatch):
+    # Issue 13: the level-SELECT_LEVEL samples the base domain was chosen by are kept, so
+    # param.remesh(SELECT_LEVEL) does not relax them again, and gives what recomputing gives
+    # (also for moved positions: the samples are held fixed like the point location).
+    from dataclasses import replace
+    from jaxparam.manifold import parameterization as P
+    mesh = plate(2, n=4)
+    _, param = manifold_map(mesh, 40, verbose=False)
+    assert [s[0] for s in param.structure.samples] == [P.SELECT_LEVEL]
+    fresh = replace(param, structure=replace(param.structure, samples=()))
+    want = fresh.remesh(P.SELECT_LEVEL)
+    V1 = np.asarray(mesh.vertices) * np.array([1.0, 1.2, 0.9])
+    moved = np.asarray(fresh.with_vertices(V1).remesh(P.SELECT_LEVEL).mesh.vertices)
+
+    def fail(*args, **kwargs):
+        raise AssertionError("the kept samples were relaxed again")
+
+    monkeypatch.setattr(P, "_relaxed_samples", fail)
+    for _ in range(2):
+        got = param.remesh(P.SELECT_LEVEL)
+        np.testing.assert_array_equal(np.asarray(got.mesh.vertices), np.asarray(want.mesh.vertices))
+        np.testing.assert_array_equal(np.asarray(got.mesh.faces), np.asarray(want.mesh.faces))
+    np.testing.assert_array_equal(np.asarray(param.with_vertices(V1).remesh(P.SELECT_LEVEL).mesh.vertices), moved)
+    with pytest.raises(AssertionError, match="relaxed again"):     # other levels: computed
+        param.remesh(P.SELECT_LEVEL - 1)
+
+
+def test_decimations_run_together_give_each_cap_alone():
+    # Issue 13: decimate_caps shares the collapses the caps agree on, and each result is
+    # bitwise the one maps_decimate gives with that cap alone (and the same error).
+    from jaxparam.manifold.maps import AREA_CAPS, decimate_caps, maps_decimate
+    mesh = jp.load(data_path("meshes", "decimated-knight.off"))
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    caps = (*AREA_CAPS, (1.0, 0, 0))
+    together = decimate_caps(V, F, 60, caps, verbose=False)
+    assert len({r[1].tobytes() for r in together}) > 1                # they do branch
+    for cap, got in zip(caps, together):
+        want = maps_decimate(V, F, 60, area_cap=cap, verbose=False)
+        for a, b in zip(want[:4], got[:4]):
+            assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+        assert len(want[4].levels) == len(got[4].levels)
+        for la, lb in zip(want[4].levels, got[4].levels):
+            assert all(p.tobytes() == q.tobytes() for p, q in zip(la, lb))
+    T = jp.shapes.torus(24, 12)
+    errs = decimate_caps(np.asarray(T.vertices), np.asarray(T.faces), 14, AREA_CAPS, verbose=False)
+    assert all(isinstance(e, jp.SolverError) and "stopped at 18 faces" in str(e) for e in errs)

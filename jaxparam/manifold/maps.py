@@ -35,7 +35,7 @@ from ..host import face_areas
 from ..progress import progress
 from .decimate import plane_quadrics
 
-__all__ = ["maps_decimate", "MapsHistory"]
+__all__ = ["maps_decimate", "decimate_caps", "MapsHistory"]
 
 #: Rules a collapse must pass, strictest first: (cosine bound of a face's tilt, cosine of the
 #: largest corner allowed in a new face, largest ``|log a|`` of the ring's flattening exponent
@@ -130,74 +130,92 @@ def _pairs(L: _Level, heads: np.ndarray):
 
 def _candidates(L: _Level, V, Q, rules, scale2, top=1, area=None):
     """The valid half-edge collapses and their costs ``(heads, cost)``, among each vertex's
-    ``top`` cheapest targets (all of them when ``top`` is None)."""
-    n = L.deg.size
-    u, w = L.row, L.nbr
-    deg = L.deg
-    apex1 = L.nbr[L.nxt]                                      # r_{k+1}
-    prev = L.ptr[u] + (L.pos - 1) % np.maximum(deg[u], 1)
-    apex0 = L.nbr[prev]                                       # r_{k-1}
-    ok = L.flat_ok[u] & (L.log_a[u] <= rules[2]) & (deg[u] + deg[w] - 4 >= 3) & (deg[apex0] >= 4) & (deg[apex1] >= 4)
-    heads = np.flatnonzero(ok)
-    x = np.concatenate([V[w[heads]], np.ones((heads.size, 1))], 1)
-    Qs = Q[u[heads]] + Q[w[heads]]
-    cost = np.maximum(np.einsum("ki,kij,kj->k", x, Qs, x), 0.0)
-    # A small length term, so flat regions still collapse their shortest edges first.
-    d = V[w[heads]] - V[u[heads]]
-    cost = cost + 1e-3 * np.einsum("ij,ij->i", d, d) ** 2
-    if top is not None:                    # only each vertex's `top` cheapest targets
-        order = np.lexsort((cost, u[heads]))
-        heads, cost = heads[order], cost[order]
-        r = u[heads]
-        start = np.concatenate([[0], np.flatnonzero(r[1:] != r[:-1]) + 1]) if r.size else r
-        rank = np.arange(r.size) - np.repeat(start, np.diff(np.append(start, r.size)))
-        heads, cost = heads[rank < top], cost[rank < top]
-    # Link condition: u and w share exactly their two apexes (count the x in N(u) with
-    # edge (x, w), by sorted edge keys).
-    ekey = u.astype(np.int64) * n + w                          # sorted: CSR rows, then...
-    eorder = np.argsort(ekey, kind="stable")
-    eks = ekey[eorder]
-    hu = L.row[heads]
-    cnt = deg[hu]
-    hh = np.repeat(np.arange(heads.size), cnt)
-    xs = L.nbr[L.ptr[np.repeat(hu, cnt)] + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
-    q = xs.astype(np.int64) * n + L.nbr[heads][hh]
-    at = np.clip(np.searchsorted(eks, q), 0, max(eks.size - 1, 0))
-    common = np.bincount(hh, weights=eks[at] == q, minlength=heads.size)
-    keep = common == 2
-    heads, cost = heads[keep], cost[keep]
-    # Geometry: every surviving wedge (u, r_j, r_j+1) -> (w, r_j, r_j+1).
-    h, j = _pairs(L, heads)
-    uu, ww = L.row[h], L.nbr[h]
-    a, b = L.nbr[j], L.nbr[L.nxt[j]]
-    zh, z0, z1 = L.z[h], L.z[j], L.z[L.nxt[j]]
-    flat = _orient(zh, z0, z1)
-    zs = np.abs(zh).sum(1) + np.abs(z0).sum(1) + np.abs(z1).sum(1)
-    good = flat > 1e-12 * zs * zs
-    if area is not None:
-        # The input area each new face would hold (the ring's held area spread evenly over
-        # the flattened ring) at most `most`.
-        ring_held, most = area
-        old_flat = np.bincount(u, weights=_orient(np.zeros_like(L.z), L.z, L.z[L.nxt]), minlength=n)
-        good &= ring_held[uu] * flat <= most * np.maximum(old_flat[uu], 1e-300)
-    Vu, Vw, Va, Vb = V[uu], V[ww], V[a], V[b]
-    old = np.cross(Va - Vu, Vb - Vu)
-    new = np.cross(Va - Vw, Vb - Vw)
-    lo, ln = np.sqrt(np.einsum("ij,ij->i", old, old)), np.sqrt(np.einsum("ij,ij->i", new, new))
-    tilt, corner = rules[:2]
-    good &= ln > 1e-14 * scale2
-    good &= np.einsum("ij,ij->i", old, new) > tilt * lo * ln
-    if corner > -1.5:
-        e0, e1, e2 = Va - Vw, Vb - Va, Vw - Vb
-        l0, l1, l2 = (np.sqrt(np.einsum("ij,ij->i", e, e)) + 1e-300 for e in (e0, e1, e2))
-        c0 = -np.einsum("ij,ij->i", e2, e0) / (l2 * l0)
-        c1 = -np.einsum("ij,ij->i", e0, e1) / (l0 * l1)
-        c2 = -np.einsum("ij,ij->i", e1, e2) / (l1 * l2)
-        good &= np.minimum(np.minimum(c0, c1), c2) >= corner
-    bad = np.bincount(h[~good], minlength=u.size)
-    keep = bad[heads] == 0
-    heads, cost = heads[keep], cost[keep]
-    return heads, cost
+    ``top`` cheapest targets (all of them when ``top`` is None); ``area`` ``None`` or
+    ``(ring_held (n,), most)``, the area cap (see :func:`maps_decimate`)."""
+    return _Candidates(L, V, Q, rules, scale2, top).under(area)
+
+
+class _Candidates:
+    """:func:`_candidates` in two steps, so decimations with different area caps share the
+    first: the collapses and their surviving wedges that pass every test but the cap (made
+    here), then :meth:`under` an area cap (a test of each wedge, and-ed with the others: the
+    same result as testing it among them)."""
+
+    def __init__(self, L: _Level, V, Q, rules, scale2, top=1):
+        n = L.deg.size
+        u, w = L.row, L.nbr
+        deg = L.deg
+        apex1 = L.nbr[L.nxt]                                      # r_{k+1}
+        prev = L.ptr[u] + (L.pos - 1) % np.maximum(deg[u], 1)
+        apex0 = L.nbr[prev]                                       # r_{k-1}
+        ok = L.flat_ok[u] & (L.log_a[u] <= rules[2]) & (deg[u] + deg[w] - 4 >= 3) & (deg[apex0] >= 4) & (deg[apex1] >= 4)
+        heads = np.flatnonzero(ok)
+        x = np.concatenate([V[w[heads]], np.ones((heads.size, 1))], 1)
+        Qs = Q[u[heads]] + Q[w[heads]]
+        cost = np.maximum(np.einsum("ki,kij,kj->k", x, Qs, x), 0.0)
+        # A small length term, so flat regions still collapse their shortest edges first.
+        d = V[w[heads]] - V[u[heads]]
+        cost = cost + 1e-3 * np.einsum("ij,ij->i", d, d) ** 2
+        if top is not None:                    # only each vertex's `top` cheapest targets
+            order = np.lexsort((cost, u[heads]))
+            heads, cost = heads[order], cost[order]
+            r = u[heads]
+            start = np.concatenate([[0], np.flatnonzero(r[1:] != r[:-1]) + 1]) if r.size else r
+            rank = np.arange(r.size) - np.repeat(start, np.diff(np.append(start, r.size)))
+            heads, cost = heads[rank < top], cost[rank < top]
+        # Link condition: u and w share exactly their two apexes (count the x in N(u) with
+        # edge (x, w), by sorted edge keys).
+        ekey = u.astype(np.int64) * n + w                          # sorted: CSR rows, then...
+        eorder = np.argsort(ekey, kind="stable")
+        eks = ekey[eorder]
+        hu = L.row[heads]
+        cnt = deg[hu]
+        hh = np.repeat(np.arange(heads.size), cnt)
+        xs = L.nbr[L.ptr[np.repeat(hu, cnt)] + (np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt))]
+        q = xs.astype(np.int64) * n + L.nbr[heads][hh]
+        at = np.clip(np.searchsorted(eks, q), 0, max(eks.size - 1, 0))
+        common = np.bincount(hh, weights=eks[at] == q, minlength=heads.size)
+        keep = common == 2
+        heads, cost = heads[keep], cost[keep]
+        # Geometry: every surviving wedge (u, r_j, r_j+1) -> (w, r_j, r_j+1).
+        h, j = _pairs(L, heads)
+        uu, ww = L.row[h], L.nbr[h]
+        a, b = L.nbr[j], L.nbr[L.nxt[j]]
+        zh, z0, z1 = L.z[h], L.z[j], L.z[L.nxt[j]]
+        flat = _orient(zh, z0, z1)
+        zs = np.abs(zh).sum(1) + np.abs(z0).sum(1) + np.abs(z1).sum(1)
+        good = flat > 1e-12 * zs * zs
+        Vu, Vw, Va, Vb = V[uu], V[ww], V[a], V[b]
+        old = np.cross(Va - Vu, Vb - Vu)
+        new = np.cross(Va - Vw, Vb - Vw)
+        lo, ln = np.sqrt(np.einsum("ij,ij->i", old, old)), np.sqrt(np.einsum("ij,ij->i", new, new))
+        tilt, corner = rules[:2]
+        good &= ln > 1e-14 * scale2
+        good &= np.einsum("ij,ij->i", old, new) > tilt * lo * ln
+        if corner > -1.5:
+            e0, e1, e2 = Va - Vw, Vb - Va, Vw - Vb
+            l0, l1, l2 = (np.sqrt(np.einsum("ij,ij->i", e, e)) + 1e-300 for e in (e0, e1, e2))
+            c0 = -np.einsum("ij,ij->i", e2, e0) / (l2 * l0)
+            c1 = -np.einsum("ij,ij->i", e0, e1) / (l0 * l1)
+            c2 = -np.einsum("ij,ij->i", e1, e2) / (l1 * l2)
+            good &= np.minimum(np.minimum(c0, c1), c2) >= corner
+        self.L, self.heads, self.cost, self.h, self.uu, self.flat, self.good = L, heads, cost, h, uu, flat, good
+        self._old_flat = None
+
+    def under(self, area=None):
+        """``(heads, cost)`` of the collapses that pass every test, and the area cap ``area``
+        (``None`` or ``(ring_held (n,), most)``: the input area each new face would hold, the
+        ring's held area spread evenly over the flattened ring, at most ``most``)."""
+        L, good = self.L, self.good
+        if area is not None:
+            ring_held, most = area
+            if self._old_flat is None:
+                self._old_flat = np.bincount(L.row, weights=_orient(np.zeros_like(L.z), L.z, L.z[L.nxt]),
+                                             minlength=L.deg.size)
+            good = good & (ring_held[self.uu] * self.flat <= most * np.maximum(self._old_flat[self.uu], 1e-300))
+        bad = np.bincount(self.h[~good], minlength=L.row.size)
+        keep = bad[self.heads] == 0
+        return self.heads[keep], self.cost[keep]
 
 
 def _independent(L: _Level, heads, cost, limit: int):
@@ -324,66 +342,131 @@ def maps_decimate(V: np.ndarray, F: np.ndarray, base_faces: int, *, area_cap=Non
     its base face and barycentric coordinates in that face's corner order, and the
     :class:`MapsHistory` that runs the map backwards.
     """
+    out = decimate_caps(V, F, base_faces, (area_cap,), verbose=verbose)[0]
+    if isinstance(out, SolverError):
+        raise out
+    return out
+
+
+class _Run:
+    """The state of one or more decimations that have made the same collapses so far (the
+    mesh, quadrics, the points' faces and coordinates, the recorded levels), and of each of
+    them (``members``: ``[which cap, factor, doublings, reset, cap step, rules level]``)."""
+
+    def __init__(self, F, alive_f, Q, dead, pf, pb, levels, faces_left, members):
+        self.F, self.alive_f, self.Q, self.dead, self.pf, self.pb = F, alive_f, Q, dead, pf, pb
+        self.levels, self.faces_left, self.members = levels, faces_left, members
+
+    def split(self, members) -> "_Run":
+        """A copy of the state for ``members`` (before this level's collapses)."""
+        return _Run(self.F.copy(), self.alive_f.copy(), self.Q.copy(), self.dead.copy(),
+                    self.pf.copy(), self.pb.copy(), list(self.levels), self.faces_left, members)
+
+
+def decimate_caps(V: np.ndarray, F: np.ndarray, base_faces: int, caps, *, verbose=None) -> list:
+    """:func:`maps_decimate` once per area cap of ``caps``, each the same as alone, sharing
+    the work while they make the same collapses (issue 13).
+
+    A cap binds only once faces get large, late in the decimation (bunny, 100 base faces:
+    the first 35 of 92 levels, 6,966 -> 674 faces, are the same for every cap of
+    :data:`AREA_CAPS`).  So the decimations run together, level by level: the level's rings
+    are made once, each decimation picks its collapses (the candidates' tests but the cap
+    shared), and those that pick the same ones (or none: only their rules change) stay
+    together; the others go on from a copy of the state.
+
+    **Returns:** one entry per cap, :func:`maps_decimate`'s result or the
+    :class:`SolverError` it would raise."""
     V = np.asarray(V, np.float64)
     F = np.array(F, np.int64)
     n, m = V.shape[0], F.shape[0]
     scale2 = float(np.sum(np.ptp(V, axis=0) ** 2))
     Q = plane_quadrics(V, F)
-    alive_f = np.ones(m, bool)
-    dead = np.zeros(n, bool)
     pf = np.empty(n, np.int64)
     pf[F.ravel()] = np.repeat(np.arange(m), 3)
     pb = np.zeros((n, 3))
     cidx = np.empty(n, np.int64)
     cidx[F.ravel()] = np.tile(np.arange(3), m)
     pb[np.arange(n), cidx] = 1.0
-    faces_left = m
-    level_rules = 0
-    levels: list = []
-    factor, doublings, reset = area_cap if area_cap is not None else (np.inf, 0, -1)
-    cap_step = 0 if area_cap is not None else -1
-    if area_cap is not None:                       # input area per vertex; mean base face's
+    members = []
+    for i, cap in enumerate(caps):
+        factor, doublings, reset = cap if cap is not None else (np.inf, 0, -1)
+        members.append([i, factor, doublings, reset, 0 if cap is not None else -1, 0])
+    if any(cap is not None for cap in caps):       # input area per vertex; mean base face's
         A = face_areas(V, F)
         va = np.bincount(F.ravel(), np.repeat(A / 3, 3), minlength=n)
         target = va.sum() / base_faces
-    with progress(total=(m - base_faces) // 2, desc="decimation", unit="collapse", verbose=verbose) as bar:
-        while faces_left > base_faces:
-            slots = np.flatnonzero(alive_f)
-            L = _Level(V, F, slots, n)
-            area = None
-            if cap_step >= 0:                      # input area held by each vertex's ring
-                held = np.bincount(pf, va, minlength=m)
-                area = (np.bincount(L.row, weights=held[L.face], minlength=n),
-                        factor * 2.0 ** cap_step * target)
-            heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2, area=area)
-            if not heads.size:
-                heads, cost = _candidates(L, V, Q, _RULES[level_rules], scale2, top=None, area=area)
-            if not heads.size:
-                if 0 <= cap_step < doublings:
-                    cap_step += 1
+    results: list = [None] * len(caps)
+    runs = [_Run(F, np.ones(m, bool), Q, np.zeros(n, bool), pf, pb, [], m, members)]
+    with progress(total=len(caps) * ((m - base_faces) // 2), desc="decimation", unit="collapse",
+                  verbose=verbose) as bar:
+        while runs:
+            run = runs.pop()
+            if run.faces_left <= base_faces or not run.members:
+                _finish(run, m, results)
+                continue
+            L = _Level(V, run.F, np.flatnonzero(run.alive_f), n)
+            ring_held, shared = None, {}
+            picks: dict = {}                       # chosen collapses (bytes) -> members
+            for mb in run.members:
+                _, factor, doublings, reset, cap_step, level_rules = mb
+                area = None
+                if cap_step >= 0:                  # input area held by each vertex's ring
+                    if ring_held is None:
+                        held = np.bincount(run.pf, va, minlength=m)
+                        ring_held = np.bincount(L.row, weights=held[L.face], minlength=n)
+                    area = (ring_held, factor * 2.0 ** cap_step * target)
+                for top in (1, None):
+                    if (level_rules, top) not in shared:
+                        shared[level_rules, top] = _Candidates(L, V, run.Q, _RULES[level_rules], scale2, top)
+                    heads, cost = shared[level_rules, top].under(area)
+                    if heads.size:
+                        break
+                if not heads.size:                 # no collapse: relax the cap, or the rules
+                    if 0 <= cap_step < doublings:
+                        mb[4] += 1
+                    elif level_rules + 1 < len(_RULES):
+                        mb[5] += 1
+                        mb[4] = min(cap_step, reset)
+                    elif cap_step >= 0:            # the cap goes last
+                        mb[4] = -1
+                    else:
+                        results[mb[0]] = SolverError(
+                            f"manifold_map: decimation stopped at {run.faces_left} faces: no "
+                            "collapse keeps the topology and a one-to-one map; ask for more "
+                            f"than {run.faces_left} base faces.", stage="decimate")
+                        continue
+                    picks.setdefault(None, (None, []))[1].append(mb)
                     continue
-                if level_rules + 1 < len(_RULES):
-                    level_rules += 1
-                    cap_step = min(cap_step, reset)
-                    continue
-                if cap_step >= 0:                  # the cap goes last
-                    cap_step = -1
-                    continue
-                raise SolverError(f"manifold_map: decimation stopped at {faces_left} faces: no "
-                                  "collapse keeps the topology and a one-to-one map; ask for more "
-                                  f"than {faces_left} base faces.", stage="decimate")
-            chosen = _independent(L, heads, cost, (faces_left - base_faces) // 2)
-            order = np.argsort(pf, kind="stable")
-            face_ptr = np.zeros(m + 1, np.int64)
-            np.cumsum(np.bincount(pf, minlength=m), out=face_ptr[1:])
-            _collapse(L, V, F, alive_f, Q, dead, pf, pb, chosen, face_ptr, order, levels)
-            faces_left -= 2 * chosen.size
-            bar.update(int(chosen.size))
-    kept = np.flatnonzero(~dead)
-    slots = np.flatnonzero(alive_f)
-    new_of_slot = np.full(m, -1, np.int64)
-    new_of_slot[slots] = np.arange(slots.size)
-    return kept, np.searchsorted(kept, F[slots]), new_of_slot[pf], pb, MapsHistory(tuple(levels), slots)
+                chosen = _independent(L, heads, cost, (run.faces_left - base_faces) // 2)
+                picks.setdefault(chosen.tobytes(), (chosen, []))[1].append(mb)
+            groups = list(picks.values())
+            if not groups:                         # every one of them failed
+                continue
+            # Copies first (the state before this level), then each group's collapses.
+            branches = [run] + [run.split(mbs) for _, mbs in groups[1:]]
+            for br, (chosen, mbs) in zip(branches, groups):
+                br.members = mbs
+                if chosen is not None:
+                    order = np.argsort(br.pf, kind="stable")
+                    face_ptr = np.zeros(m + 1, np.int64)
+                    np.cumsum(np.bincount(br.pf, minlength=m), out=face_ptr[1:])
+                    _collapse(L, V, br.F, br.alive_f, br.Q, br.dead, br.pf, br.pb, chosen, face_ptr, order,
+                              br.levels)
+                    br.faces_left -= 2 * chosen.size
+                    bar.update(int(chosen.size) * len(mbs))
+            runs.extend(branches)
+    return results
+
+
+def _finish(run: _Run, m: int, results: list) -> None:
+    """The results of the decimations of ``run`` (done), each its own arrays."""
+    for k, mb in enumerate(run.members):
+        kept = np.flatnonzero(~run.dead)
+        slots = np.flatnonzero(run.alive_f)
+        new_of_slot = np.full(m, -1, np.int64)
+        new_of_slot[slots] = np.arange(slots.size)
+        results[mb[0]] = (kept, np.searchsorted(kept, run.F[slots]), new_of_slot[run.pf],
+                          run.pb if k == 0 else run.pb.copy(), MapsHistory(tuple(run.levels), slots))
 
 
 class MapsHistory:
@@ -397,6 +480,18 @@ class MapsHistory:
 
     def __init__(self, levels: tuple, base_slots: np.ndarray):
         self.levels, self.base_slots = levels, base_slots
+        # What every pull-back needs of each level, made once (issue 13: the remesh pulls
+        # points back about a dozen times): the surviving faces' slots and wedges, where each
+        # ring's wedges start, and the old wedges' corners, coordinate by coordinate, with
+        # their doubled signed areas (the same arithmetic as computing them per point).
+        self._levels = []
+        for f, which, survive, before, after in levels:
+            ptr = np.zeros(int(which.max()) + 2, np.int64)
+            np.cumsum(np.bincount(which, minlength=int(which.max()) + 1), out=ptr[1:])
+            T = [np.ascontiguousarray(before[:, c, d]) for c in range(3) for d in range(2)]
+            det = (T[2] - T[0]) * (T[5] - T[1]) - (T[3] - T[1]) * (T[4] - T[0])
+            self._levels.append((f, which, f[survive], np.flatnonzero(survive), after, ptr, T, det))
+        self._m = int(max(base_slots.max(), max((lv[0].max() for lv in levels), default=0))) + 1
 
     def pull_back(self, region: np.ndarray, bary: np.ndarray, *, verbose=None):
         """The input mesh face ``(k,)`` and barycentric coordinates ``(k, 3)`` of points of
@@ -405,33 +500,31 @@ class MapsHistory:
         piecewise-linear map of the flattened rings run backwards)."""
         slot = self.base_slots[np.asarray(region, np.int64)].copy()
         b = np.array(bary, np.float64)
-        m = int(max(self.base_slots.max(), max((lv[0].max() for lv in self.levels), default=0))) + 1
-        entry = np.full(m, -1, np.int64)                 # reset after each level (not refilled)
-        for f, which, survive, before, after in progress(reversed(self.levels), total=len(self.levels),
-                                                         desc="pull back", unit="level", verbose=verbose):
-            live = f[survive]
-            entry[live] = np.flatnonzero(survive)
+        entry = np.full(self._m, -1, np.int64)           # reset after each level (not refilled)
+        for f, which, live, live_at, after, ptr, T, det in progress(
+                reversed(self._levels), total=len(self._levels), desc="pull back", unit="level",
+                verbose=verbose):
+            entry[live] = live_at
             e = entry[slot]
             entry[live] = -1
             hit = np.flatnonzero(e >= 0)
             if not hit.size:
                 continue
-            q = np.einsum("kc,kcd->kd", b[hit], after[e[hit]])
+            eh = e[hit]
+            q = np.einsum("kc,kcd->kd", b[hit], after[eh])
             # Candidates: every old wedge of the same ring.
-            grp = which[e[hit]]
-            ptr = np.zeros(int(which.max()) + 2, np.int64)
-            np.cumsum(np.bincount(which, minlength=int(which.max()) + 1), out=ptr[1:])
+            grp = which[eh]
             cnt = ptr[grp + 1] - ptr[grp]
             starts = np.cumsum(cnt) - cnt
             pi = np.repeat(np.arange(hit.size), cnt)
             cj = np.repeat(ptr[grp], cnt) + (np.arange(cnt.sum()) - np.repeat(starts, cnt))
-            T = before[cj]
-            qq = q[pi]
-            det = _orient(T[:, 0], T[:, 1], T[:, 2])
-            l0 = _orient(qq, T[:, 1], T[:, 2]) / det
-            l1 = _orient(T[:, 0], qq, T[:, 2]) / det
-            bb = np.stack([l0, l1, 1.0 - l0 - l1], 1)
-            depth = bb.min(1)
+            x0, y0, x1, y1, x2, y2 = (t[cj] for t in T)
+            qx, qy = q[:, 0][pi], q[:, 1][pi]
+            dj = det[cj]
+            l0 = ((x1 - qx) * (y2 - qy) - (y1 - qy) * (x2 - qx)) / dj
+            l1 = ((qx - x0) * (y2 - y0) - (qy - y0) * (x2 - x0)) / dj
+            l2 = 1.0 - l0 - l1
+            depth = np.minimum(np.minimum(l0, l1), l2)
             # Each point's deepest old wedge (the first of equals; the first where all are nan),
             # per segment without sorting (a lexsort here was half the pull-back's time).
             top = np.fmax.reduceat(depth, starts)
@@ -439,7 +532,7 @@ class MapsHistory:
             head = starts.copy()
             first = np.concatenate([[True], pi[at][1:] != pi[at][:-1]])
             head[pi[at[first]]] = at[first]
-            nb = np.clip(bb[head], 0.0, None)
+            nb = np.clip(np.stack([l0[head], l1[head], l2[head]], 1), 0.0, None)
             slot[hit] = f[cj[head]]
             b[hit] = nb / nb.sum(1, keepdims=True)
         return slot, b

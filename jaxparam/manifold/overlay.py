@@ -20,6 +20,11 @@ from .charts import REFERENCE
 
 __all__ = ["Unfolding", "base_charts", "unfolding", "draw_faces"]
 
+#: :class:`Unfolding` looks pairs up in a table of ``m0 ** 2`` entries up to this size
+#: (1,000 base faces), and searches its sorted keys above.
+TABLE_MAX = 1 << 20
+
+
 class Unfolding:
     """For pairs ``(r, g)`` of base triangles sharing a vertex: ``g``'s corners (in ``g``'s
     corner order) in ``r``'s chart, ``(3, 2)``; :meth:`get` looks pairs up in bulk."""
@@ -29,11 +34,18 @@ class Unfolding:
         keys = keys[order]
         first = np.concatenate([[True], keys[1:] != keys[:-1]])
         self.keys, self.corners, self.m0 = keys[first], corners[order][first], m0
+        # The search's answer for every pair, looked up instead of searched when the table is
+        # small (the relaxation asks about a million pairs per remesh; issue 13).
+        self.table = (np.clip(np.searchsorted(self.keys, np.arange(m0 * m0)), 0, self.keys.size - 1)
+                      if m0 * m0 <= TABLE_MAX else None)
 
     def get(self, r: np.ndarray, g: np.ndarray):
         """``(found (k,) bool, corners (k, 3, 2))`` for pairs ``(r[i], g[i])``."""
         q = np.asarray(r, np.int64) * self.m0 + np.asarray(g, np.int64)
-        at = np.clip(np.searchsorted(self.keys, q), 0, self.keys.size - 1)
+        if self.table is not None:
+            at = self.table[q]
+        else:
+            at = np.clip(np.searchsorted(self.keys, q), 0, self.keys.size - 1)
         return self.keys[at] == q, self.corners[at]
 
 

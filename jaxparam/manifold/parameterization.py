@@ -19,7 +19,7 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .maps import AREA_CAPS, maps_decimate
+from .maps import AREA_CAPS, decimate_caps
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
                     relax_samples, sharpest_vertices)
@@ -61,7 +61,14 @@ class ManifoldStructure:
     barycentric coordinates from the decimation and ``history`` there the
     :class:`~jaxparam.manifold.maps.MapsHistory` that :meth:`lift` pulls points back through
     (the exact inverse of the decimation's map), ``positions (n, 3)`` there the input
-    positions :meth:`ManifoldParameterization.remesh` relaxes its samples with (held fixed)."""
+    positions :meth:`ManifoldParameterization.remesh` relaxes its samples with (held fixed);
+    ``samples`` remesh samples already computed, ``((levels, r, b, pulled), ...)`` (base faces
+    ``(k,)``, barycentric coordinates ``(k, 3)``, their pull-back ``(face, bary)`` onto the
+    input or ``None``) for ``remesh(levels)`` with the default ``relax=None``: on the ``"maps"``
+    route :func:`manifold_map` keeps those of the level :data:`SELECT_LEVEL` remesh it chose
+    the base domain by, so ``param.remesh(SELECT_LEVEL)`` only lifts them (issue 13).  They
+    depend on the fields above only (the positions held fixed), not on the vertices
+    :meth:`ManifoldParameterization.with_vertices` is given, so they stay valid there."""
 
     n_input: int
     steps: tuple
@@ -72,6 +79,7 @@ class ManifoldStructure:
     vertex_bary: np.ndarray | None = None
     history: object = None
     positions: np.ndarray | None = None
+    samples: tuple = ()
 
 
 def _barycentric(T, p):
@@ -304,10 +312,20 @@ class ManifoldParameterization:
         remesh has no plane domain), ``.hierarchy`` for :mod:`jaxparam.wavelets`."""
         if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= 8):
             raise MeshError(f"manifold remesh: levels must be an integer in [0, 8], got {levels!r}.")
+        return self._remesh_from(*self._samples(int(levels), relax))
+
+    def _samples(self, levels: int, relax):
+        """``(H, r, b, pulled)``: the dyadic hierarchy of the base domain and the samples of
+        :meth:`remesh` (see :func:`_relaxed_samples`); those of ``structure.samples`` when
+        it holds them (``relax=None``)."""
         F0 = np.asarray(self.base_faces, np.int64)
         H = dyadic_hierarchy(F0, int(F0.max()) + 1, levels)
         S = self.structure
         guarded = relax is None
+        if guarded and S is not None:
+            for lv, r, b, pulled in S.samples:
+                if lv == levels:
+                    return H, r, b, pulled
         if relax is None:
             relax = S is not None and S.history is not None and S.positions is not None
         if relax and levels >= 2:
@@ -318,6 +336,10 @@ class ManifoldParameterization:
                                             H, levels, guarded)
         else:
             (r, b), pulled = _dyadic_samples(F0, H, levels), None
+        return H, r, b, pulled
+
+    def _remesh_from(self, H, r, b, pulled) -> Remesh:
+        """The :class:`~jaxparam.remesh.Remesh` of samples from :meth:`_samples`."""
         if pulled is None:
             X = self.lift(r, b @ REFERENCE)
         else:                                   # the pull-back the choice made, not redone
@@ -481,17 +503,26 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     Fm = np.asarray(mesh.faces, np.int64)
     caps = AREA_CAPS if mesh.n_faces <= SELECT_MAX_FACES else AREA_CAPS[:1]
     best, sharp = None, None
-    for cap in caps:
-        out = _maps_param(mesh, V, maps_decimate(V, Fm, base_faces, area_cap=cap, verbose=verbose))
+    # The decimations run together while they make the same collapses (issue 13); each
+    # result is the one decimating with its cap alone gives, or the error it raises.
+    for decimated in decimate_caps(V, Fm, base_faces, caps, verbose=verbose):
+        if isinstance(decimated, SolverError):
+            raise decimated
+        out = _maps_param(mesh, V, decimated)
         if len(caps) == 1:
             return out
         if sharp is None:
             sharp = sharpest_vertices(V, Fm)
-        semi = out[1].remesh(SELECT_LEVEL)
+        samples = out[1]._samples(SELECT_LEVEL, None)
+        semi = out[1]._remesh_from(*samples)
         err = estimated_distance(V, Fm, sharp, np.asarray(semi.mesh.vertices), semi.mesh.faces)
         if best is None or err < best[0]:
-            best = (err, out)
-    return best[1]
+            best = (err, out, samples)
+    # Keep the chosen remesh's samples (issue 13): param.remesh(SELECT_LEVEL), which the CLI
+    # and most callers ask for next, then only lifts them (the same arrays, not relaxed again).
+    _, (base, param), (_, r, b, pulled) = best
+    S = replace(param.structure, samples=((SELECT_LEVEL, r, b, pulled),))
+    return base, replace(param, structure=S)
 
 
 def _maps_param(mesh: TriMesh, V: np.ndarray, decimated):

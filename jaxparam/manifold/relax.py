@@ -119,7 +119,7 @@ class BaseDomain:
         only the others are searched."""
         r = np.asarray(r, np.int64)
         own = _bary(self.charts[r], p)
-        out = np.flatnonzero(~(own > 0).all(1))
+        out = np.flatnonzero(~((own[:, 0] > 0) & (own[:, 1] > 0) & (own[:, 2] > 0)))
         if out.size < r.size:
             g, b = r.copy(), own
             if out.size:
@@ -135,9 +135,15 @@ class BaseDomain:
         ok, C = self.U.get(rr, gg)
         bb = _bary(C, np.repeat(p, K, 0))
         side = _bary(self.charts[r], p) > 0                      # (k, 3)
-        holds = (self.F0[cand][:, :, :, None] == self.F0[r][:, None, None, :]).any(2)   # (k, K, 3)
-        allowed = (holds | ~side[:, None, :]).all(2).ravel()
-        depth = np.where(ok & allowed, bb.min(1), -np.inf).reshape(-1, K)
+        # Allowed: g holds every corner of r on whose side the point lies (the corners
+        # and sides one by one: small-axis reductions were most of the search's time).
+        Fg, Fr = self.F0[cand], self.F0[r]                       # (k, K, 3), (k, 3)
+        allowed = np.ones(cand.shape, bool)
+        for c in range(3):
+            v = Fr[:, c, None]
+            allowed &= (Fg[:, :, 0] == v) | (Fg[:, :, 1] == v) | (Fg[:, :, 2] == v) | ~side[:, c, None]
+        depth = np.where(ok & allowed.ravel(), np.minimum(np.minimum(bb[:, 0], bb[:, 1]), bb[:, 2]),
+                         -np.inf).reshape(-1, K)
         pick = np.arange(r.size) * K + depth.argmax(1)
         b = np.clip(bb[pick], 0.0, None)
         return gg[pick], b / b.sum(1, keepdims=True)
@@ -234,7 +240,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
         vertex of ``rs`` is written in ``rs`` itself (exact, no unfolding around it)."""
         rv, bv = r[v].copy(), b[v].copy()
         corner = D.F0[rs] == at_vertex[v][:, None]
-        own = pinned[v] & corner.any(1)
+        own = pinned[v] & (corner[:, 0] | corner[:, 1] | corner[:, 2])
         rv[own] = rs[own]
         bv[own] = corner[own].astype(np.float64)
         return rv, bv
@@ -243,7 +249,11 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
         """Edges whose ends lie in base faces that share no edge (drawn across a corner,
         where unfolded sectors can overlap)."""
         rj, _ = seen_from(r[i], j, r, b)
-        shared = (D.F0[r[i]][:, :, None] == D.F0[rj][:, None, :]).sum((1, 2))
+        Fi, Fj = D.F0[r[i]], D.F0[rj]
+        shared = np.zeros(i.size, np.int64)
+        for a in range(3):
+            for c in range(3):
+                shared += Fi[:, a] == Fj[:, c]
         return shared < 2
 
     def midpoints(r, b):
@@ -286,7 +296,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
             back[faces[bad_f].ravel()] = True
             back[i[bad_e]] = True
             back[j[bad_e]] = True
-            back &= (r1 != r) | np.any(b1 != b, axis=1)
+            back &= (r1 != r) | (b1[:, 0] != b[:, 0]) | (b1[:, 1] != b[:, 1]) | (b1[:, 2] != b[:, 2])
             if not back.any():
                 break
             r1[back], b1[back] = r[back], b[back]
