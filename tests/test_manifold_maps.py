@@ -462,3 +462,22 @@ def test_decimations_run_together_give_each_cap_alone():
     T = jp.shapes.torus(24, 12)
     errs = decimate_caps(np.asarray(T.vertices), np.asarray(T.faces), 14, AREA_CAPS, verbose=False)
     assert all(isinstance(e, jp.SolverError) and "stopped at 18 faces" in str(e) for e in errs)
+
+
+def test_decimations_do_not_depend_on_where_the_mesh_is():
+    """Found in QA: the same mesh moved by 1e6 got another base domain (quadric costs x^T Q x
+    carry the planes' offsets, which cancel far from the origin).  Both decimations centre the
+    mesh first."""
+    from jaxparam.manifold.decimate import decimate
+    from jaxparam.manifold.maps import AREA_CAPS, decimate_caps
+
+    mesh = jp.shapes.torus(24, 12)
+    V = np.asarray(mesh.vertices) + 0.01 * np.random.default_rng(1).standard_normal((mesh.n_vertices, 3))
+    F = np.asarray(mesh.faces)
+    here = decimate_caps(V, F, 40, AREA_CAPS)
+    far = decimate_caps(V + 1e6, F, 40, AREA_CAPS)
+    for a, b in zip(here, far):
+        assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    kept, F0 = decimate(jp.TriMesh(V, F), 40)
+    kept_far, F0_far = decimate(jp.TriMesh(V + 1e6, F), 40)
+    assert np.array_equal(kept, kept_far) and np.array_equal(F0, F0_far)

@@ -42,6 +42,7 @@ def decimate(mesh: TriMesh, base_faces: int):
     """
     t = mesh.topology
     V = np.asarray(mesh.vertices, np.float64)
+    V = V - 0.5 * (V.min(0) + V.max(0))        # quadrics far from the origin cancel (maps.py)
     F = np.array(t.faces, np.int64)
     n, m = V.shape[0], F.shape[0]
     scale = float(np.linalg.norm(np.ptp(V, axis=0)))

@@ -377,6 +377,10 @@ def decimate_caps(V: np.ndarray, F: np.ndarray, base_faces: int, caps, *, verbos
     **Returns:** one entry per cap, :func:`maps_decimate`'s result or the
     :class:`SolverError` it would raise."""
     V = np.asarray(V, np.float64)
+    # Quadric costs x^T Q x hold the planes' offsets: far from the origin they cancel (a mesh
+    # moved by 1e3 of its size decimated otherwise).  Centred, the decimation depends on the
+    # shape alone, up to the rounding of the positions given.
+    V = V - 0.5 * (V.min(0) + V.max(0))
     F = np.array(F, np.int64)
     n, m = V.shape[0], F.shape[0]
     scale2 = float(np.sum(np.ptp(V, axis=0) ** 2))
