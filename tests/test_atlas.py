@@ -621,3 +621,24 @@ def test_turned_correlations_match_direct_ones():
     skipped = pack._correlations(F_occ, [None, turns[1], None, turns[3]], shape)
     assert skipped[0] is None and skipped[2] is None
     np.testing.assert_allclose(skipped[3], got[3], atol=1e-3)
+
+
+def test_batched_hull_areas_match_qhull():
+    """compact.hull_areas (all of a chart's candidate pieces at once) against Qhull, one subset
+    at a time: random subsets with repeated points, a collinear run, fewer than three points."""
+    from jaxparam.atlas.compact import hull_area, hull_areas
+
+    rng = np.random.default_rng(11)
+    P = rng.standard_normal((60, 2))
+    P = np.vstack([P, P[:5], [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]])
+    M = rng.random((40, P.shape[0])) < 0.5
+    M[0] = True
+    M[1] = False
+    M[2] = False
+    M[2, :2] = True                                      # two points: no area
+    M[3] = False
+    M[3, -4:] = True                                     # collinear: no area
+    got = hull_areas(P, M)
+    want = np.array([hull_area(P[m]) for m in M])
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    assert got[1] == got[2] == got[3] == 0.0 and got[0] > got[4:].max() * 0.999

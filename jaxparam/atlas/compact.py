@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from .charts import faces_are_disk
 from .pack import min_area_rotation
 
-__all__ = ["hull_area", "best_cut", "plan_splits"]
+__all__ = ["hull_area", "hull_areas", "best_cut", "plan_splits"]
 
 #: Cut directions (radians, in the chart's minimal-area-rectangle frame) and positions
 #: (quantiles of the face centroids' coordinate along the direction).
@@ -41,6 +41,57 @@ def hull_area(P: np.ndarray) -> float:
         return float(ConvexHull(P).volume)
     except (QhullError, ValueError):
         return 0.0
+
+
+def hull_areas(P: np.ndarray, members: np.ndarray) -> np.ndarray:
+    """Areas of the convex hulls of many subsets of one point set, at once.
+
+    **Arguments:** ``P (n, 2)``; ``members (s, n)`` bool, the points of each subset.
+    **Returns:** ``(s,)`` areas (0 for fewer than three points or none enclosed).
+
+    Andrew's monotone chain, run for all subsets together: the points are sorted once, and
+    each step pushes the next point onto the chains of the subsets that hold it after
+    popping, in every such chain, the points that no longer turn left.  The Python loop is
+    over the points (and the pops), not the subsets: :func:`best_cut`'s 272 hulls of one
+    chart cost a few numpy passes instead of 272 Qhull calls (about 0.1 ms each).  Same
+    areas as :func:`hull_area` to rounding (tested)."""
+    P = np.asarray(P, np.float64)
+    members = np.asarray(members, bool)
+    s, n = members.shape
+    order = np.lexsort((P[:, 1], P[:, 0]))
+    X, Y = P[order, 0], P[order, 1]
+    M = members[:, order]
+    area2 = np.zeros(s)
+    rows = np.arange(s)
+    for sweep in (range(n), range(n - 1, -1, -1)):          # lower chain, then upper chain
+        H = np.zeros((s, n + 1), np.int64)
+        k = np.zeros(s, np.int64)
+        first = np.full(s, -1)
+        for i in sweep:
+            on = M[:, i]
+            if not on.any():
+                continue
+            while True:
+                r = rows[on & (k >= 2)]
+                if r.size == 0:
+                    break
+                a, b = H[r, k[r] - 2], H[r, k[r] - 1]
+                cross = (X[b] - X[a]) * (Y[i] - Y[a]) - (Y[b] - Y[a]) * (X[i] - X[a])
+                pop = r[cross <= 0]
+                if pop.size == 0:
+                    break
+                k[pop] -= 1
+            r = rows[on]
+            H[r, k[r]] = i
+            k[r] += 1
+            first[r] = np.where(first[r] < 0, i, first[r])
+        # the chain's shoelace terms (x_j y_{j+1} - x_{j+1} y_j) along it
+        j = np.arange(n)[None, :]
+        valid = j < (k - 1)[:, None]
+        a, b = H[:, :-1], H[:, 1:]
+        term = X[a] * Y[b] - X[b] * Y[a]
+        area2 += np.sum(np.where(valid, term, 0.0), axis=1)
+    return np.where(members.sum(1) >= 3, np.maximum(0.5 * area2, 0.0), 0.0)
 
 
 def _connected(sub: sp.csr_matrix, keep: np.ndarray) -> bool:
@@ -73,7 +124,7 @@ def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
     if 0.5 * np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])) > accept * H0:
         return 0.0, None
     C = Q.mean(1)                                                    # (f, 2) centroids
-    cands = []
+    cuts, sides = [], []
     for th in DIRECTIONS:
         x = C @ np.array([np.cos(th), np.sin(th)])
         for t in np.unique(np.quantile(x, QUANTILES)):
@@ -81,7 +132,20 @@ def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
             k = int(side.sum())
             if k < min_faces or side.size - k < min_faces:
                 continue
-            s = (hull_area(Q[side].reshape(-1, 2)) + hull_area(Q[~side].reshape(-1, 2))) / H0
+            cuts.append((th, t))
+            sides.append(side)
+    cands = []
+    if cuts:
+        # the pieces' points: the corners of their faces (each corner point once)
+        pts, corner = np.unique(Q.reshape(-1, 2), axis=0, return_inverse=True)
+        corner = corner.reshape(-1, 3)
+        S = np.array(sides)                                          # (c, f)
+        members = np.zeros((2 * len(cuts), pts.shape[0]), bool)
+        for piece, faces_in in enumerate(np.concatenate([S, ~S])):
+            members[piece, corner[faces_in].ravel()] = True
+        areas = hull_areas(pts, members)
+        for i, (th, t) in enumerate(cuts):
+            s = (areas[i] + areas[len(cuts) + i]) / H0
             if s <= accept:
                 cands.append((s, th, t))
     for s, th, t in sorted(cands):
