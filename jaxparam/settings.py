@@ -133,20 +133,11 @@ class Settings:
 
     @keep_freed_mb.setter
     def keep_freed_mb(self, mb: int) -> None:
-        from . import memory
-
-        try:
-            if isinstance(mb, bool):
-                raise TypeError
-            mb = operator.index(mb)
-        except TypeError:
-            raise ValueError(f"jp.config.keep_freed_mb must be a whole number of MiB, got {mb!r}.") from None
-        if not 0 <= mb <= memory.MAX_KEEP_MB:
-            raise ValueError(f"jp.config.keep_freed_mb must be in [0, {memory.MAX_KEEP_MB}] MiB, "
-                             f"got {mb}.")
-        self._keep_freed_mb = mb
+        self._keep_freed_mb = _keep_mb(mb, "jp.config.keep_freed_mb")
         if jax_loaded():
-            memory.keep_freed(mb)
+            from . import memory
+
+            memory.keep_freed(self._keep_freed_mb)
 
     def __setattr__(self, name, value):
         if name not in Settings.__slots__ and not isinstance(getattr(Settings, name, None), property):
@@ -170,20 +161,40 @@ def default_compile_cache() -> str | None:
     return str(Path(base) / "jaxparam" / "jax")
 
 
+#: The most MiB :attr:`Settings.keep_freed_mb` takes (glibc's mallopt takes a C int; the same
+#: as ``jaxparam.memory.MAX_KEEP_MB``, which this module does not import).
+MAX_KEEP_MB = 2047
+
+
+def _keep_mb(value, what: str) -> int:
+    """``value`` as a whole number of MiB in ``[0, MAX_KEEP_MB]``, else ``ValueError`` naming
+    ``what``."""
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        mb = operator.index(value)
+    except TypeError:
+        raise ValueError(f"{what} must be a whole number of MiB, got {value!r}.") from None
+    if not 0 <= mb <= MAX_KEEP_MB:
+        raise ValueError(f"{what} must be in [0, {MAX_KEEP_MB}] MiB, got {mb}.")
+    return mb
+
+
 def default_keep_freed_mb() -> int:
-    """``$JAXPARAM_KEEP_FREED_MB`` (a whole number of MiB, 0 to 2047) or 512; another value is
-    ignored with a warning that names the variable (a setting must not stop the import)."""
+    """``$JAXPARAM_KEEP_FREED_MB`` (a whole number of MiB, 0 to :data:`MAX_KEEP_MB`) or 512;
+    another value is ignored with a warning that names the variable (a setting must not stop
+    the import)."""
     value = os.environ.get("JAXPARAM_KEEP_FREED_MB")
     if value is None or not value.strip():
         return 512
     try:
         mb = int(value.strip())
-        if 0 <= mb <= 2047:
-            return mb
     except ValueError:
-        pass
-    warnings.warn(f"JAXPARAM_KEEP_FREED_MB must be a whole number of MiB in [0, 2047] (0: glibc's "
-                  f"own limits), got {value!r}; using 512.", stacklevel=2)
+        mb = value
+    try:
+        return _keep_mb(mb, "JAXPARAM_KEEP_FREED_MB")
+    except ValueError as exc:
+        warnings.warn(f"{exc} (0 leaves glibc's own limits); using 512.", stacklevel=2)
     return 512
 
 

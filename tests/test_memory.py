@@ -76,6 +76,10 @@ def test_bad_environment_value_warns_and_keeps_the_default(monkeypatch):
         assert settings.default_keep_freed_mb() == 512
     monkeypatch.setenv("JAXPARAM_KEEP_FREED_MB", "0")
     assert settings.default_keep_freed_mb() == 0
+    monkeypatch.setenv("JAXPARAM_KEEP_FREED_MB", "4096")
+    with pytest.warns(UserWarning, match=r"JAXPARAM_KEEP_FREED_MB must be in \[0, 2047\]"):
+        assert settings.default_keep_freed_mb() == 512
+    assert settings.MAX_KEEP_MB == memory.MAX_KEEP_MB
 
 
 def test_freed_blocks_are_reused_inside_and_returned_outside(glibc_limits):
