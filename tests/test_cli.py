@@ -49,6 +49,37 @@ def test_bad_input_exit_3(tmp_path, capsys):
     assert not (tmp_path / "o.obj").exists()
 
 
+def _obj_with_nan_vertex(path):
+    m = jp.shapes.graph_surface(6)
+    V = np.array(m.vertices)
+    V[5, 2] = np.nan
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in V.tolist()]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(m.faces).tolist()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_refused_input_leaves_no_solver_warm_up_running(tmp_path, capsys):
+    """flatten starts the sparse solver's runtime in a thread while it reads; a refused input
+    must not return (and exit the interpreter) with that thread inside MKL's start-up."""
+    import threading
+
+    p = _obj_with_nan_vertex(tmp_path / "nan.obj")
+    assert main(["flatten", str(p), "-o", str(tmp_path / "o.obj")]) == 3
+    assert "vertex 5" in capsys.readouterr().err
+    assert not [t for t in threading.enumerate() if t.name == "jaxparam-sparse-warm-up"]
+
+
+def test_refused_input_exits_3_as_a_whole_process(tmp_path):
+    """The whole process exits 3 with the message (it crashed with a segmentation fault,
+    exit code 139, when the interpreter finalized during the warm-up)."""
+    p = _obj_with_nan_vertex(tmp_path / "nan.obj")
+    r = subprocess.run([sys.executable, "-m", "jaxparam", "-q", "flatten", str(p), "-o",
+                        str(tmp_path / "o.obj")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 3, r.stderr
+    assert "non-finite" in r.stderr and not (tmp_path / "o.obj").exists()
+
+
 def test_closed_mesh_exit_3(tmp_path, capsys):
     p = tmp_path / "s.obj"
     jp.save(p, jp.shapes.sphere(1))

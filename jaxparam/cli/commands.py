@@ -141,8 +141,12 @@ def cmd_flatten(args) -> int:
     from ..sparse import warm_up
 
     warming = warm_up()
-    mesh, clock = begin(args.mesh)
-    warming.join()
+    try:
+        mesh, clock = begin(args.mesh)
+    finally:
+        # Also when the input is refused: the interpreter must not exit while the thread is
+        # still inside MKL's start-up (a segmentation fault, exit code 139, instead of 3).
+        warming.join()
     uv, rep = flatten_mesh(mesh, **flatten_options(args), say=lambda m: print(m, file=sys.stderr))
     rep["seconds"]["load"] = clock["load"]
     warn_unconverged("flatten", rep)
