@@ -105,6 +105,11 @@ def test_bad_manifold_input_is_named(torus):
         manifold_map(mesh, 12, method="paths")
     with pytest.raises(MeshError, match="unknown weights"):
         manifold_map(mesh, 40, weights="cotan")
+    with pytest.raises(MeshError, match=r"got 1600\. Pass a smaller even count \(e\.g\. 800\)"):
+        manifold_map(mesh, 1600)
+    tet = jp.TriMesh(np.eye(4, 3), np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]))
+    with pytest.raises(MeshError, match="has 4 faces.*at least 4: there is nothing to decimate"):
+        manifold_map(tet, 4)
     with pytest.raises(MeshError, match=r"levels must be an integer in \[0, 8\]"):
         torus[2].remesh(9)
 

@@ -459,11 +459,18 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     check_closed_manifold(mesh)
     t = mesh.topology
     least = fewest_faces(t.genus)
+    if least >= t.n_faces:
+        raise MeshError(f"manifold_map: this genus-{t.genus} mesh has {t.n_faces} faces, and a "
+                        f"base domain of genus {t.genus} needs at least {least}: there is nothing "
+                        f"to decimate. Refine the mesh first (e.g. trimesh's subdivide).")
     if not (isinstance(base_faces, (int, np.integer)) and base_faces % 2 == 0
             and least <= base_faces < t.n_faces):
+        hint = ""
+        if isinstance(base_faces, (int, np.integer)) and base_faces >= t.n_faces:
+            hint = f" Pass a smaller even count (e.g. {max(least, (t.n_faces // 4) * 2)})."
         raise MeshError(f"manifold_map: base_faces must be an even integer in [{least}, "
                         f"{t.n_faces}) for this genus-{t.genus} mesh of {t.n_faces} faces, got "
-                        f"{base_faces!r}.")
+                        f"{base_faces!r}.{hint}")
     weights = choose(weights, wts.KINDS, what="weights", where="manifold_map")
     if method == "maps":
         return _maps_route(mesh, int(base_faces), verbose)
