@@ -89,3 +89,26 @@ def test_minimize_follows_the_switch(monkeypatch):
     jp.minimize(mesh, "symmetric_dirichlet", max_iters=3)
     jp.minimize(mesh, "symmetric_dirichlet", max_iters=3, verbose=False)
     assert seen == [None, False]                       # None: jp.config.progress decides
+
+
+def test_atlas_shows_its_stages(monkeypatch, capsys):
+    """jp.atlas runs for minutes on large meshes: its stages show on one bar (charts, flatten,
+    pack, compact), which ``verbose=False`` turns off."""
+    from jaxparam.atlas import build
+
+    made = []
+
+    def recording(*args, **kwargs):
+        bar = prog.progress(*args, **{**kwargs, "delay": 0})
+        made.append((kwargs.get("verbose"), bar))
+        return bar
+
+    monkeypatch.setattr(build, "progress", recording)
+    mesh = jp.shapes.sphere(1)
+    jp.atlas(mesh, verbose=True)
+    err = capsys.readouterr().err
+    bar = made[0][1]
+    assert made[0][0] is True and bar.n == bar.total == 4 and bar.postfix == "compact"
+    assert "atlas:" in err
+    jp.atlas(mesh, verbose=False)
+    assert made[1][0] is False and capsys.readouterr().err == ""

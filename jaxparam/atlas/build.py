@@ -10,6 +10,7 @@ from .. import energies as en_mod
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
+from ..progress import progress
 from . import charts as ch
 from . import compact as cp
 from . import flatten as fl
@@ -87,7 +88,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
           max_splits: int = 16, merge_cone: float | None = None,
           small_merge_cone: float | None = None, post_merge_budget: float = 0.0,
           post_merge_cone: float = 100.0, post_merge_share: float = 0.05,
-          compact: float = 0.5, compact_accept: float = 0.9) -> Atlas:
+          compact: float = 0.5, compact_accept: float = 0.9,
+          verbose: bool | None = None) -> Atlas:
     """A UV atlas of any manifold mesh: closed or open, any genus, several components.
 
     **Arguments:**
@@ -130,6 +132,9 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       ``s1/s2`` never higher; the atlas takes 1.1-3x the time.
     - ``weights``, ``solver``, ``max_iters``: the convex-combination start's weights and
       the minimization's solver and iteration cap.
+    - ``verbose``: a progress bar over the stages (charts, flatten and its split rounds,
+      merge, pack, compact); ``None``: as ``jp.config.progress`` says (it shows for runs
+      longer than a second).
 
     **Returns:** an :class:`~jaxparam.atlas.Atlas` (``uv (n_uv, 2)``, ``uv_faces (m, 3)``,
     ``chart (m,)``, ``seams``, ``stats``).  The mesh's vertices are never duplicated or
@@ -192,68 +197,85 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                         "default) or arap.")
     t0 = time.perf_counter()
     seconds = {}
-    V = np.asarray(mesh.vertices, np.float64)
-    t = mesh.topology
-    F = t.faces
-    chart = ch.segment(mesh, cone=cone, merge_cone=merge_cone, small_cone=small_merge_cone)
-    seconds["charts"] = time.perf_counter() - t0
-    adj_csr = ch.face_csr(t)
-    corner_uv = np.zeros((F.shape[0], 3, 2))
-    todo = np.arange(F.shape[0])
-    splits = 0
-    overlaps = 0
-    t1 = time.perf_counter()
-    for round_ in range(max_splits + 1):
-        cuv, labels, q = _flatten_subset(V, F, chart, todo, en, weights, solver, max_iters)
-        corner_uv[todo] = cuv
-        bad = (q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > max_aspect)
-        if not bad.any():
-            break
-        if round_ == max_splits:
-            overlaps = int(q["overlaps"].sum())
-            if q["flips"].sum() or overlaps:
-                raise SolverError(
-                    f"atlas: {int(bad.sum())} charts still fold over after {max_splits} rounds of "
-                    "splits; raise max_splits or lower cone.", stage="atlas")
-            break
-        nxt = int(chart.max()) + 1
-        redo = []
-        for c in labels[bad]:
-            pieces = ch.split_chart(np.flatnonzero(chart == c), adj_csr, merge_small=True)
-            for k, piece in enumerate(pieces):
-                if k:
-                    chart[piece] = nxt
-                    nxt += 1
-            redo.append(np.flatnonzero(chart == c))
-            redo.extend(pieces[1:])
-        splits += int(bad.sum())
-        chart = ch.relabel(chart)
-        chart = ch.make_disks(t, chart, adj_csr)
-        # redo every chart that now holds a face of a split chart
-        touched = np.unique(chart[np.concatenate(redo)])
-        todo = np.flatnonzero(np.isin(chart, touched))
-    seconds["flatten"] = time.perf_counter() - t1
-    if post_merge_budget > 0:
-        t3 = time.perf_counter()
-        chart, corner_uv, _ = mg.merge_flattened(
-            V, F, ch.face_adjacency(t), chart, corner_uv,
-            lambda c, idx: _flatten_subset(V, F, c, idx, en, weights, solver, max_iters),
-            cone=float(post_merge_cone), budget=float(post_merge_budget),
-            max_aspect=float(max_aspect), max_share=float(post_merge_share))
-        seconds["merge"] = time.perf_counter() - t3
-    t2 = time.perf_counter()
-    laid = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
-    seconds["pack"] = time.perf_counter() - t2
-    if compact > 0:
-        t4 = time.perf_counter()
-        chart2, corner_uv2, made = _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters,
-                                            max_new=int(compact * (int(chart.max()) + 1)),
-                                            accept=float(compact_accept))
-        if made:
-            laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size), int(margin_texels))
-            if laid2[-1] > laid[-1]:          # the cuts pack tighter: keep them
-                chart, laid = chart2, laid2
-        seconds["compact"] = time.perf_counter() - t4
+    bar = progress(total=3 + (post_merge_budget > 0) + (compact > 0), desc="atlas", unit="stage",
+                   verbose=verbose)
+
+    def done(stage: str) -> None:
+        bar.set_postfix_str(stage, refresh=False)
+        bar.update(1)
+
+    try:
+        V = np.asarray(mesh.vertices, np.float64)
+        t = mesh.topology
+        F = t.faces
+        chart = ch.segment(mesh, cone=cone, merge_cone=merge_cone, small_cone=small_merge_cone)
+        seconds["charts"] = time.perf_counter() - t0
+        done(f"charts ({int(chart.max()) + 1})")
+        adj_csr = ch.face_csr(t)
+        corner_uv = np.zeros((F.shape[0], 3, 2))
+        todo = np.arange(F.shape[0])
+        splits = 0
+        overlaps = 0
+        t1 = time.perf_counter()
+        for round_ in range(max_splits + 1):
+            if round_:
+                bar.set_postfix_str(f"flatten, split round {round_}")
+            cuv, labels, q = _flatten_subset(V, F, chart, todo, en, weights, solver, max_iters)
+            corner_uv[todo] = cuv
+            bad = (q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > max_aspect)
+            if not bad.any():
+                break
+            if round_ == max_splits:
+                overlaps = int(q["overlaps"].sum())
+                if q["flips"].sum() or overlaps:
+                    raise SolverError(
+                        f"atlas: {int(bad.sum())} charts still fold over after {max_splits} rounds of "
+                        "splits; raise max_splits or lower cone.", stage="atlas")
+                break
+            nxt = int(chart.max()) + 1
+            redo = []
+            for c in labels[bad]:
+                pieces = ch.split_chart(np.flatnonzero(chart == c), adj_csr, merge_small=True)
+                for k, piece in enumerate(pieces):
+                    if k:
+                        chart[piece] = nxt
+                        nxt += 1
+                redo.append(np.flatnonzero(chart == c))
+                redo.extend(pieces[1:])
+            splits += int(bad.sum())
+            chart = ch.relabel(chart)
+            chart = ch.make_disks(t, chart, adj_csr)
+            # redo every chart that now holds a face of a split chart
+            touched = np.unique(chart[np.concatenate(redo)])
+            todo = np.flatnonzero(np.isin(chart, touched))
+        seconds["flatten"] = time.perf_counter() - t1
+        done("flatten")
+        if post_merge_budget > 0:
+            t3 = time.perf_counter()
+            chart, corner_uv, _ = mg.merge_flattened(
+                V, F, ch.face_adjacency(t), chart, corner_uv,
+                lambda c, idx: _flatten_subset(V, F, c, idx, en, weights, solver, max_iters),
+                cone=float(post_merge_cone), budget=float(post_merge_budget),
+                max_aspect=float(max_aspect), max_share=float(post_merge_share))
+            seconds["merge"] = time.perf_counter() - t3
+            done(f"merge ({int(chart.max()) + 1} charts)")
+        t2 = time.perf_counter()
+        laid = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
+        seconds["pack"] = time.perf_counter() - t2
+        done("pack")
+        if compact > 0:
+            t4 = time.perf_counter()
+            chart2, corner_uv2, made = _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters,
+                                                max_new=int(compact * (int(chart.max()) + 1)),
+                                                accept=float(compact_accept))
+            if made:
+                laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size), int(margin_texels))
+                if laid2[-1] > laid[-1]:          # the cuts pack tighter: keep them
+                    chart, laid = chart2, laid2
+            seconds["compact"] = time.perf_counter() - t4
+            done("compact")
+    finally:
+        bar.close()
     uv_faces, vertex, uv_chart, chart_uv, packing, uv, _ = laid
     seconds["total"] = time.perf_counter() - t0
     seam_ids = ch.chart_edges(t, chart)
