@@ -642,3 +642,36 @@ def test_batched_hull_areas_match_qhull():
     want = np.array([hull_area(P[m]) for m in M])
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
     assert got[1] == got[2] == got[3] == 0.0 and got[0] > got[4:].max() * 0.999
+
+
+@pytest.mark.parametrize("batched_max", [0, 10 ** 9])
+def test_best_cut_measures_each_piece_by_its_outline(monkeypatch, batched_max):
+    """best_cut's hull areas come from each piece's outline (the chart's boundary points and
+    those shared with the other piece), by Qhull or by the batch: the same cut and gain as
+    the hulls of all of each piece's points, on an L-shaped chart of 1,500 points."""
+    from scipy.spatial import Delaunay
+
+    from jaxparam.atlas import compact as cp
+    from jaxparam.atlas.charts import face_csr
+    from jaxparam.atlas.pack import min_area_rotation
+
+    rng = np.random.default_rng(5)
+    P = rng.random((3000, 2))
+    P = P[~((P[:, 0] > 0.5) & (P[:, 1] > 0.5))][:1500]
+    T = Delaunay(P).simplices
+    C = P[T].mean(1)
+    T = T[~((C[:, 0] > 0.5) & (C[:, 1] > 0.5))]
+    T = T[np.cross(P[T[:, 1]] - P[T[:, 0]], P[T[:, 2]] - P[T[:, 0]]) > 1e-12]
+    cuv = P[T]
+    adj = face_csr(jp.TriMesh(np.c_[P, np.zeros(len(P))], T, validate=False).topology)
+    monkeypatch.setattr(cp, "BATCHED_MAX_POINTS", batched_max)
+    gain, side = cp.best_cut(cuv, T, adj)
+    # the reference: every piece's hull from all of its faces' corners
+    Q = cuv @ min_area_rotation(cuv.reshape(-1, 2)).T
+    H0 = cp.hull_area(Q.reshape(-1, 2))
+    want = H0 - cp.hull_area(Q[side].reshape(-1, 2)) - cp.hull_area(Q[~side].reshape(-1, 2))
+    assert side is not None and side.sum() > 10 and (~side).sum() > 10
+    assert gain == pytest.approx(want, rel=1e-12)
+    assert gain > 0.1 * H0                               # most of the notch is cut away
+    rim = cp.chart_rim(T, len(P))
+    assert rim.sum() < 0.2 * len(P) and rim[np.argmin(P.sum(1))]
