@@ -25,16 +25,19 @@ def disk_check(mesh: TriMesh, where: str) -> None:
         raise TopologyError(
             f"{where}: the mesh has {t.n_components} connected components (vertex counts "
             f"{first_few(sizes.tolist())}); {_unstitched(mesh) or ''}parameterize each on its "
-            "own (e.g. trimesh's split) or keep the largest.")
+            "own (e.g. trimesh's split) or keep the largest; for texture coordinates of the "
+            "whole mesh, make a UV atlas (jp.atlas, jaxparam atlas).")
     if t.is_closed:
         raise TopologyError(
             f"{where}: the mesh is closed (no boundary, genus {t.genus}); a disk method needs a "
             "boundary: cut the mesh open along a path, or parameterize it over a base domain with "
-            "jp.manifold_map (closed meshes of any genus).")
+            "jp.manifold_map (closed meshes of any genus), or make a UV atlas of charts with "
+            "jp.atlas (jaxparam atlas).")
     if t.genus != 0:
         raise TopologyError(
             f"{where}: the mesh has genus {t.genus} with {len(t.boundary_loops)} boundary loops; a "
-            "disk method needs genus 0: cut the handles open first.")
+            "disk method needs genus 0: cut the handles open first, or make a UV atlas of charts "
+            "with jp.atlas (jaxparam atlas).")
 
 
 def _unstitched(mesh: TriMesh) -> str | None:
