@@ -559,9 +559,30 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
         want = "(s1, s2, params) or (J, params)" if parametric else "(s1, s2) or (J)"
         raise MeshError(f"energy: a user energy takes {want}, got a function of {len(args)} "
                         "arguments.")
+    _check_scalar(fn, n, params if parametric else None, parametric)
     make = _from_sv if n == 2 else _from_J
     return make(name or getattr(fn, "__name__", "user"), fn, scale_invariant, barrier=barrier,
                 parametric=parametric, params=params if parametric else None)
+
+
+def _check_scalar(fn: Callable, n: int, params, parametric: bool) -> None:
+    """Refuse, when the energy is made, an ``fn`` whose value is not one real number per
+    triangle (found by :func:`jax.eval_shape`, no arithmetic); a function JAX cannot trace
+    abstractly is left to fail, with its own message, where it is used."""
+    probe = ((jax.ShapeDtypeStruct((), jnp.float64),) * 2 if n == 2
+             else (jax.ShapeDtypeStruct((2, 2), jnp.float64),))
+    extra = (params,) if parametric else ()
+    try:
+        out = jax.eval_shape(lambda *a: fn(*a, *extra), *probe)
+    except Exception:       # noqa: BLE001 - not ours to judge here
+        return
+    shape = getattr(out, "shape", None)
+    if shape != () or not jnp.issubdtype(getattr(out, "dtype", jnp.int32), jnp.floating):
+        got = (f"shape {shape} and dtype {getattr(out, 'dtype', None)}" if shape is not None
+               else type(out).__name__)
+        what = "f(s1, s2)" if n == 2 else "f(J) of the 2x2 Jacobian J"
+        raise MeshError(f"energy: {what} must return one real number (a density per "
+                        f"triangle), got {got}; reduce it, e.g. with jnp.sum.")
 
 
 _STRETCH_OF_J = _SingularValueForm(lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2), True)

@@ -635,8 +635,10 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
                         "remesh locates the sample points on the host from the UVs' values: call "
                         "it outside jax.jit (jax.grad and jax.jvp are fine), or pass concrete UVs.")
     if U.shape != (mesh.n_vertices, 2):
+        hint = (f" (the levels are the third argument: jp.remesh(mesh, levels={uv!r}))"
+                if U.shape == () and isinstance(uv, (int, np.integer)) else "")
         raise MeshError(f"remesh: uv must be a finite ({mesh.n_vertices}, 2) array (one UV per vertex), "
-                        f"got shape {U.shape}.")
+                        f"got shape {U.shape}{hint}.")
     # Vertices in no face carry no UV (jp.convex_map gives them nan): only the used ones count.
     used = np.zeros(mesh.n_vertices, bool)
     used[np.asarray(mesh.faces).ravel()] = True

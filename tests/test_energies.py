@@ -291,3 +291,16 @@ def test_mesh_energy_second_derivatives_match_autodiff_of_old_formula():
                jax.jit(jax.hessian(old, argnums=arg))(V, uv), 1e-9)
     _close(jax.jit(jax.jacfwd(jax.grad(new, argnums=0), argnums=1))(V, uv),
            jax.jit(jax.jacrev(jax.grad(old, argnums=0), argnums=1))(V, uv), 1e-9)
+
+
+def test_a_user_energy_that_is_not_a_density_is_refused_when_made():
+    """An ``f`` that returns an array (not one number per triangle) is refused by jp.energy,
+    naming the shape, instead of a broadcasting error deep inside minimize."""
+    with pytest.raises(jp.MeshError, match=r"f\(J\) of the 2x2 Jacobian J must return one real number.*shape \(2, 2\)"):
+        jp.energy(lambda J: J)
+    with pytest.raises(jp.MeshError, match=r"f\(s1, s2\) must return one real number.*shape \(2,\)"):
+        jp.energy(lambda s1, s2: jnp.stack([s1, s2]))
+    with pytest.raises(jp.MeshError, match="shape \\(2, 2\\)"):
+        jp.energy(lambda J, a: a * J, 2.0)
+    e = jp.energy(lambda J, a: a * jnp.sum(J ** 2), 2.0)          # a density: accepted
+    assert e.parametric

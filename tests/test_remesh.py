@@ -133,6 +133,8 @@ def test_bad_remesh_input_is_named(surface):
         jp.remesh(mesh, uv, levels=-1)
     with pytest.raises(MeshError, match=r"uv must be a finite \(144, 2\)"):
         jp.remesh(mesh, uv[:10], levels=1)
+    with pytest.raises(MeshError, match=r"levels are the third argument: jp.remesh\(mesh, levels=3\)"):
+        jp.remesh(mesh, 3)                                     # levels where uv goes
     bad = uv.copy()
     bad[:, 0] *= -1                                            # mirrored: every face flipped
     with pytest.raises(MeshError, match="not one-to-one: faces 0, 1"):
