@@ -520,6 +520,9 @@ def test_atlas_uv_gradient_matches_finite_differences():
     h = 1e-3
     fd = (loss(V0 + h * D) - loss(V0 - h * D)) / (2 * h)
     assert float(np.sum(g * D)) == pytest.approx(float(fd), rel=1e-3)
+    # positions of another mesh: refused, not gathered out of bounds (JAX clamps the indices)
+    with pytest.raises(jp.MeshError, match=r"atlas_uv: vertices must be .*got shape \(5, 3\)"):
+        atlas_uv(V0[:5], a, pieces=pieces)
 
 
 @pytest.mark.slow

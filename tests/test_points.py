@@ -428,3 +428,13 @@ def test_points_that_are_all_on_the_boundary_are_mapped_by_the_boundary_map():
     np.testing.assert_allclose(np.linalg.norm(np.asarray(uv), axis=1), 1.0)
     rec = jp.reconstruct_surface(P, k=3)
     assert rec.mesh.n_faces == 2 and np.all(np.isfinite(np.asarray(rec.uv)))
+
+
+def test_point_graph_refuses_a_bad_k_or_shape():
+    P = np.random.default_rng(0).random((40, 3))
+    with pytest.raises(jp.PointCloudError, match=r"k \(neighbours per point\) must be an integer in \[1, 40\).*got 0"):
+        jp.points.point_graph(P, k=0)
+    with pytest.raises(jp.PointCloudError, match=r"got 40"):
+        jp.points.point_graph(P, k=40)
+    with pytest.raises(jp.PointCloudError, match=r"\(N, 3\) array, got shape \(40, 2\)"):
+        jp.points.point_graph(P[:, :2])

@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import geometry as geo
 from .. import topology as topo
+from ..errors import MeshError
 from ..mesh import TriMesh
 from ..optimize import minimize
 
@@ -60,6 +61,10 @@ def atlas_uv(vertices, a, *, max_iters: int = 200, pieces=None):
         g = jax.grad(loss)(jnp.asarray(mesh.vertices))
     """
     V = jnp.asarray(vertices, jnp.float64)
+    if V.ndim != 2 or V.shape[1] != 3 or V.shape[0] <= int(np.max(a.vertex)):
+        raise MeshError(f"atlas_uv: vertices must be the atlas's mesh's positions, an (n, 3) "
+                        f"array with n > {int(np.max(a.vertex))} (its largest vertex index), "
+                        f"got shape {V.shape}.")
     pk = a.packing
     pieces = chart_pieces(a) if pieces is None else pieces
     out = jnp.zeros((a.uv.shape[0], 2), jnp.float64)

@@ -122,7 +122,13 @@ def point_graph(points, k: int = K, *, radius: float | None = None, symmetric: b
     Computed in Morton order (:func:`point_graph_in_order`) and returned in the input's order.
     """
     P0 = np.asarray(points, np.float64)
+    if P0.ndim != 2 or P0.shape[1] != 3:
+        raise PointCloudError(f"point_graph: points must be an (N, 3) array, got shape {P0.shape}.")
     N = P0.shape[0]
+    if radius is None and (isinstance(k, bool) or not isinstance(k, (int, np.integer))
+                           or not 1 <= k < N):
+        raise PointCloudError(f"point_graph: k (neighbours per point) must be an integer in "
+                              f"[1, {N}) for {N} points, got {k!r}; the default is {K}.")
     # Work in a space-filling-curve order, so that neighbours sit close in memory (the tree
     # query and the gathers run 1.3-2x faster on a large shuffled cloud); every result is
     # mapped back to the input's order at the end.
