@@ -135,8 +135,13 @@ def test_unreachable_cluster_is_reported():
     Q = np.vstack([P, far])
     g = PT.point_graph(Q, 6)
     bnd = mesh.topology.boundary_loops[0]
-    with pytest.raises(PointCloudError, match=r"12 points cannot reach the boundary .*\(e.g. point 1\d\d\)"):
+    with pytest.raises(PointCloudError, match=r"12 points cannot reach the boundary .*\(e.g. point 1\d\d at \(50, 50, 5\d"):
         jp.meshless_map(Q, k=6, graph=g, boundary_indices=bnd)
+    # a second piece as large as the first: named as a piece to reconstruct on its own
+    Q2 = np.vstack([P, P + [5.0, 0.0, 0.0]])
+    g2 = PT.point_graph(Q2, 6)
+    with pytest.raises(PointCloudError, match=r"they are 144 of the 288 points, a separate piece"):
+        jp.meshless_map(Q2, k=6, graph=g2, boundary_indices=bnd)
 
 
 def test_load_points_formats(tmp_path):

@@ -194,8 +194,9 @@ def meshless_map(points, *, k: int = K, weights: str = "inverse_distance", bound
                       symmetric=sym), bnd
 
 
-def _check_solvable(E: wts.FanEntries, N: int, boundary: np.ndarray) -> None:
-    """Every interior point must reach a boundary point along G (end of §8)."""
+def _check_solvable(E: wts.FanEntries, N: int, boundary: np.ndarray, P=None) -> None:
+    """Every interior point must reach a boundary point along G (end of §8); ``P (N, 3)``
+    (concrete, optional) places the first such point in the message."""
     src = E.free[E.row]
     G = sp.csr_matrix((np.ones(src.size), (E.nbr, src)), shape=(N + 1, N + 1))   # reversed edges
     G = G + sp.csr_matrix((np.ones(boundary.size), (np.full(boundary.size, N), boundary)),
@@ -205,10 +206,16 @@ def _check_solvable(E: wts.FanEntries, N: int, boundary: np.ndarray) -> None:
     ok[reached] = True
     bad = E.free[~ok[E.free]]
     if bad.size:
+        where = ""
+        if P is not None and not isinstance(P, jax.core.Tracer):
+            x, y, z = (float(c) for c in np.asarray(P)[int(bad[0])])
+            where = f" at ({x:.4g}, {y:.4g}, {z:.4g})"
+        piece = (f"; they are {bad.size} of the {N} points, a separate piece of the point set: "
+                 "reconstruct each piece on its own" if bad.size >= 0.1 * N else "")
         raise PointCloudError(
             f"meshless_map: {bad.size} points cannot reach the boundary through their neighbours "
-            f"(e.g. point {int(bad[0])}); the system (3) would be singular: increase k, use "
-            "symmetric neighbourhoods, or remove the isolated cluster.")
+            f"(e.g. point {int(bad[0])}{where}); the system (3) would be singular: increase k, use "
+            f"symmetric neighbourhoods, or remove the isolated cluster{piece}.")
 
 
 def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary: str, spacing: str,
@@ -224,7 +231,7 @@ def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary:
     fixed = np.zeros(N, bool)
     fixed[bnd] = True
     E = wts.fan_entries(graph.indptr, graph.indices, fixed)
-    _check_solvable(E, N, bnd)
+    _check_solvable(E, N, bnd, P)
     if E.n_rows == 0:       # every point is on the boundary polygon: nothing to solve for
         Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
         uv_b = _boundary_map(Pj, jax.device_put(bnd), boundary=boundary, spacing=spacing)
