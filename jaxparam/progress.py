@@ -91,6 +91,10 @@ class StageBar:
         self._bar.update(1)
         return seconds
 
+    def note(self, text: str) -> None:
+        """Show ``text`` beside the bar while a stage runs (e.g. its round)."""
+        self._bar.set_postfix_str(text)
+
     def close(self) -> None:
         self._bar.close()
 

@@ -94,16 +94,15 @@ def test_minimize_follows_the_switch(monkeypatch):
 def test_atlas_shows_its_stages(monkeypatch, capsys):
     """jp.atlas runs for minutes on large meshes: its stages show on one bar (charts, flatten,
     pack, compact), which ``verbose=False`` turns off."""
-    from jaxparam.atlas import build
-
     made = []
+    original = prog.progress
 
     def recording(*args, **kwargs):
-        bar = prog.progress(*args, **{**kwargs, "delay": 0})
+        bar = original(*args, **{**kwargs, "delay": 0})
         made.append((kwargs.get("verbose"), bar))
         return bar
 
-    monkeypatch.setattr(build, "progress", recording)
+    monkeypatch.setattr(prog, "progress", recording)          # StageBar's bar factory
     mesh = jp.shapes.sphere(1)
     jp.atlas(mesh, verbose=True)
     err = capsys.readouterr().err

@@ -10,7 +10,8 @@ from .. import energies as en_mod
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
-from ..progress import progress
+from ..clock import StageClock
+from ..progress import StageBar
 from . import charts as ch
 from . import compact as cp
 from . import flatten as fl
@@ -196,30 +197,23 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                         f"{en_mod.NO_FREE_MINIMUM[en.name]}; use symmetric_dirichlet (the "
                         "default) or arap.")
     t0 = time.perf_counter()
-    seconds = {}
-    bar = progress(total=3 + (post_merge_budget > 0) + (compact > 0), desc="atlas", unit="stage",
-                   verbose=verbose)
-
-    def done(stage: str) -> None:
-        bar.set_postfix_str(stage, refresh=False)
-        bar.update(1)
-
+    clock = StageClock()
+    mark = StageBar(clock, total=3 + (post_merge_budget > 0) + (compact > 0), desc="atlas",
+                    verbose=verbose)
     try:
         V = np.asarray(mesh.vertices, np.float64)
         t = mesh.topology
         F = t.faces
         chart = ch.segment(mesh, cone=cone, merge_cone=merge_cone, small_cone=small_merge_cone)
-        seconds["charts"] = time.perf_counter() - t0
-        done(f"charts ({int(chart.max()) + 1})")
+        mark("charts")
         adj_csr = ch.face_csr(t)
         corner_uv = np.zeros((F.shape[0], 3, 2))
         todo = np.arange(F.shape[0])
         splits = 0
         overlaps = 0
-        t1 = time.perf_counter()
         for round_ in range(max_splits + 1):
             if round_:
-                bar.set_postfix_str(f"flatten, split round {round_}")
+                mark.note(f"flatten, split round {round_}")
             cuv, labels, q = _flatten_subset(V, F, chart, todo, en, weights, solver, max_iters)
             corner_uv[todo] = cuv
             bad = (q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > max_aspect)
@@ -248,23 +242,17 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
             # redo every chart that now holds a face of a split chart
             touched = np.unique(chart[np.concatenate(redo)])
             todo = np.flatnonzero(np.isin(chart, touched))
-        seconds["flatten"] = time.perf_counter() - t1
-        done("flatten")
+        mark("flatten")
         if post_merge_budget > 0:
-            t3 = time.perf_counter()
             chart, corner_uv, _ = mg.merge_flattened(
                 V, F, ch.face_adjacency(t), chart, corner_uv,
                 lambda c, idx: _flatten_subset(V, F, c, idx, en, weights, solver, max_iters),
                 cone=float(post_merge_cone), budget=float(post_merge_budget),
                 max_aspect=float(max_aspect), max_share=float(post_merge_share))
-            seconds["merge"] = time.perf_counter() - t3
-            done(f"merge ({int(chart.max()) + 1} charts)")
-        t2 = time.perf_counter()
+            mark("merge")
         laid = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
-        seconds["pack"] = time.perf_counter() - t2
-        done("pack")
+        mark("pack")
         if compact > 0:
-            t4 = time.perf_counter()
             chart2, corner_uv2, made = _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters,
                                                 max_new=int(compact * (int(chart.max()) + 1)),
                                                 accept=float(compact_accept))
@@ -272,12 +260,11 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size), int(margin_texels))
                 if laid2[-1] > laid[-1]:          # the cuts pack tighter: keep them
                     chart, laid = chart2, laid2
-            seconds["compact"] = time.perf_counter() - t4
-            done("compact")
+            mark("compact")
     finally:
-        bar.close()
+        mark.close()
     uv_faces, vertex, uv_chart, chart_uv, packing, uv, _ = laid
-    seconds["total"] = time.perf_counter() - t0
+    seconds = {**clock.seconds, "total": time.perf_counter() - t0}
     seam_ids = ch.chart_edges(t, chart)
     ef = t.edge_faces[seam_ids]
     seams = t.edges[seam_ids[(ef[:, 0] >= 0) & (ef[:, 1] >= 0)]]

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .charts import faces_are_disk
-from .pack import min_area_rotation
+from .pack import boundary_segments, min_area_rotation
 
 __all__ = ["hull_area", "hull_areas", "chart_rim", "best_cut", "plan_splits"]
 
@@ -102,12 +102,10 @@ def hull_areas(P: np.ndarray, members: np.ndarray) -> np.ndarray:
 
 
 def chart_rim(faces: np.ndarray, n: int) -> np.ndarray:
-    """``(n,) bool``: the points on the boundary of the faces ``faces (f, 3)`` (an edge
-    of one face only), of ``n`` points."""
-    E = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    e, count = np.unique(E, axis=0, return_counts=True)
+    """``(n,) bool``: the points on the boundary of the consistently oriented faces
+    ``faces (f, 3)`` (:func:`~jaxparam.atlas.pack.boundary_segments`), of ``n`` points."""
     rim = np.zeros(n, bool)
-    rim[e[count == 1].ravel()] = True
+    rim[boundary_segments(faces, np.zeros(faces.shape[0], np.int64))[0].ravel()] = True
     return rim
 
 
