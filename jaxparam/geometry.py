@@ -16,7 +16,7 @@ from . import tol
 
 __all__ = [
     "safe_sqrt", "dot", "safe_norm", "local_frames", "face_areas", "corner_angles", "signed_areas",
-    "jacobians", "jacobian_from_frame", "singular_values", "max_step",
+    "jacobians", "jacobian_from_frame", "singular_values", "max_step", "max_steps",
 ]
 
 
@@ -163,6 +163,12 @@ def max_step(uv, direction, faces, *, safety: float = tol.MAX_STEP_SAFETY):
     **Returns:** a scalar: ``safety`` times the smallest positive root over all
     triangles, or ``inf`` when no triangle can invert along this direction.
     """
+    return jnp.min(max_steps(uv, direction, faces, safety=safety))
+
+
+def max_steps(uv, direction, faces, *, safety: float = tol.MAX_STEP_SAFETY):
+    """:func:`max_step` face by face: ``(m,)``, ``safety`` times each triangle's smallest
+    positive root (``inf`` where it cannot invert along ``direction``)."""
     Q = jnp.asarray(uv)[faces]
     D = jnp.asarray(direction)[faces]
     u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
@@ -171,8 +177,7 @@ def max_step(uv, direction, faces, *, safety: float = tol.MAX_STEP_SAFETY):
     a = cross(d1, d2)
     b = cross(u1, d2) + cross(d1, u2)
     c = cross(u1, u2)
-    t = _smallest_positive_root(a, b, c)
-    return safety * jnp.min(t)
+    return safety * _smallest_positive_root(a, b, c)
 
 
 def _smallest_positive_root(a, b, c):

@@ -25,7 +25,8 @@ from .errors import MeshError
 from .io import as_mesh
 
 __all__ = ["DistortionReport", "Theorem1", "distortion", "face_distortion", "flips",
-           "boundary_overlaps", "theorem1", "refuse_traced"]
+           "boundary_overlaps", "boundary_crossings", "segment_box_pairs", "theorem1",
+           "refuse_traced"]
 
 
 @dataclass(frozen=True)
@@ -108,41 +109,97 @@ def boundary_overlaps(mesh, uv) -> int:
     """Number of pairs of non-adjacent boundary edges whose UV images intersect.
 
     Local injectivity does not prevent a free boundary from overlapping
-    itself; this counts such crossings (bounding boxes first, exact
-    orientation tests after, in chunks).
+    itself; this counts such crossings (:func:`boundary_crossings`).
     """
     refuse_traced("metrics.boundary_overlaps", mesh, uv, vertices=False)
+    return int(boundary_crossings(mesh, uv)[1].shape[0])
+
+
+def boundary_crossings(mesh, uv):
+    """The boundary edges of ``mesh`` and which pairs of them cross in ``uv (n, 2)``.
+
+    **Returns:** ``(segments (k, 2), pairs (p, 2))``: the boundary edges as vertex pairs,
+    loop by loop (``mesh.topology.boundary_loops``), and the index pairs ``i < j`` of
+    edges that share no vertex and properly cross (strict orientation tests; edges with
+    a non-finite end cross nothing).  Candidates come from a uniform grid of about one
+    edge length (:func:`segment_box_pairs`): the time grows with the edges, not with
+    their square.
+    """
+    refuse_traced("metrics.boundary_crossings", mesh, uv, vertices=False)
     U = np.asarray(uv, np.float64)
-    segs = []
-    for loop in mesh.topology.boundary_loops:
-        segs.append(np.stack([loop, np.roll(loop, -1)], 1))
-    if not segs:
-        return 0
-    S = np.concatenate(segs)
+    loops = mesh.topology.boundary_loops
+    if not loops:
+        return np.zeros((0, 2), np.int64), np.zeros((0, 2), np.int64)
+    S = np.concatenate([np.stack([loop, np.roll(loop, -1)], 1) for loop in loops]).astype(np.int64)
     A, B = U[S[:, 0]], U[S[:, 1]]
-    lo, hi = np.minimum(A, B), np.maximum(A, B)
-    count = 0
-    k = S.shape[0]
-    chunk = max(1, 4_000_000 // max(k, 1))
-    for s in range(0, k, chunk):
-        i = np.arange(s, min(k, s + chunk))[:, None]
-        j = np.arange(k)[None, :]
-        mask = j > i
-        mask &= (lo[i, 0] <= hi[j, 0]) & (lo[j, 0] <= hi[i, 0]) & (lo[i, 1] <= hi[j, 1]) & (lo[j, 1] <= hi[i, 1])
-        ii, jj = np.nonzero(mask)
-        ii = ii + s
-        share = ((S[ii, 0] == S[jj, 0]) | (S[ii, 0] == S[jj, 1]) | (S[ii, 1] == S[jj, 0]) | (S[ii, 1] == S[jj, 1]))
-        ii, jj = ii[~share], jj[~share]
-        if ii.size == 0:
-            continue
-        def orient(p, q, r):
-            return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
-        o1 = orient(A[ii], B[ii], A[jj])
-        o2 = orient(A[ii], B[ii], B[jj])
-        o3 = orient(A[jj], B[jj], A[ii])
-        o4 = orient(A[jj], B[jj], B[ii])
-        count += int(np.sum((o1 * o2 < 0) & (o3 * o4 < 0)))
-    return count
+    ii, jj = segment_box_pairs(np.minimum(A, B), np.maximum(A, B))
+    share = ((S[ii, 0] == S[jj, 0]) | (S[ii, 0] == S[jj, 1]) | (S[ii, 1] == S[jj, 0])
+             | (S[ii, 1] == S[jj, 1]))
+    ii, jj = ii[~share], jj[~share]
+
+    def orient(p, q, r):
+        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+    cross = ((orient(A[ii], B[ii], A[jj]) * orient(A[ii], B[ii], B[jj]) < 0)
+             & (orient(A[jj], B[jj], A[ii]) * orient(A[jj], B[jj], B[ii]) < 0))
+    return S, np.stack([ii[cross], jj[cross]], 1)
+
+
+def segment_box_pairs(lo, hi, *, max_pairs: int = 4_000_000):
+    """Every pair ``i < j`` of boxes ``[lo, hi]`` (``(k, 2)`` each) that intersect (closed).
+
+    The boxes are entered in the cells of a uniform grid they touch (cell side: the
+    median box side, doubled while the entries exceed ``8 k``); two boxes that intersect
+    share the cell of their intersection's lower corner, where the pair is counted (so
+    once).  Boxes with a non-finite corner meet nothing.  Pairs are formed cell by cell,
+    about ``max_pairs`` at a time.  **Returns:** ``(i, j)``, int arrays.
+    """
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    ok = np.flatnonzero(np.all(np.isfinite(lo) & np.isfinite(hi), axis=1))
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if ok.size < 2:
+        return empty
+    lo_k, hi_k = lo[ok], hi[ok]
+    origin = lo_k.min(0)
+    span = float(np.max(hi_k.max(0) - origin))
+    h = max(float(np.median(np.max(hi_k - lo_k, axis=1))), 1e-9 * span, 1e-300)
+    while True:
+        c0 = np.floor((lo_k - origin) / h).astype(np.int64)
+        c1 = np.floor((hi_k - origin) / h).astype(np.int64)
+        size = c1 - c0 + 1
+        cells = size[:, 0] * size[:, 1]
+        if cells.sum() <= 8 * ok.size + 64:
+            break
+        h *= 2.0
+    # one entry per (box, cell): cell x varies fastest within a box
+    box = np.repeat(np.arange(ok.size), cells)
+    r = np.arange(box.size) - np.repeat(np.cumsum(cells) - cells, cells)
+    cx = c0[box, 0] + r % size[box, 0]
+    cy = c0[box, 1] + r // size[box, 0]
+    key = cx * (int(c1[:, 1].max()) + 1) + cy
+    order = np.argsort(key, kind="stable")
+    key, box = key[order], box[order]
+    cx, cy = cx[order], cy[order]
+    end = np.searchsorted(key, key, side="right")
+    partners = end - np.arange(key.size) - 1
+    out_i, out_j = [], []
+    bounds = np.searchsorted(np.cumsum(partners), np.arange(0, partners.sum(), max_pairs),
+                             side="right")
+    bounds = np.unique(np.r_[0, bounds, key.size])
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        cnt = partners[s:e]
+        p = np.repeat(np.arange(s, e), cnt)
+        q = p + 1 + (np.arange(p.size) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+        a, b = box[p], box[q]
+        meet = ((np.maximum(lo_k[a, 0], lo_k[b, 0]) <= np.minimum(hi_k[a, 0], hi_k[b, 0]))
+                & (np.maximum(lo_k[a, 1], lo_k[b, 1]) <= np.minimum(hi_k[a, 1], hi_k[b, 1])))
+        # counted once: in the cell of the intersection's lower corner
+        home = (np.maximum(c0[a, 0], c0[b, 0]) == cx[p]) & (np.maximum(c0[a, 1], c0[b, 1]) == cy[p])
+        keep = meet & home
+        a, b = a[keep], b[keep]
+        out_i.append(ok[np.minimum(a, b)])
+        out_j.append(ok[np.maximum(a, b)])
+    return np.concatenate(out_i), np.concatenate(out_j)
 
 
 def theorem1(mesh, uv, *, weights=None) -> Theorem1:

@@ -346,3 +346,91 @@ def test_a_free_boundary_is_refused_for_energies_with_no_free_minimum(energy, wh
         jp.minimize(mesh, energy, free_boundary=True)
     res = jp.minimize(mesh, energy, max_iters=5, verbose=False)      # a fixed boundary is fine
     assert np.all(np.isfinite(np.asarray(res.uv)))
+
+
+@pytest.fixture(scope="module")
+def two_charts():
+    """Two disconnected disks as one chart mesh (the atlas's layout): a coarse and a fine
+    graph surface, the second one's start warped radially (``r -> r^0.3``, one-to-one) so
+    that its first Newton step is cut short by a flip."""
+    from jaxparam.atlas import flatten as fl
+    a, b = jp.shapes.graph_surface(6), jp.shapes.graph_surface(9)
+    V = np.vstack([np.asarray(a.vertices), np.asarray(b.vertices) + [3.0, 0.0, 0.0]])
+    F = np.vstack([a.faces, b.faces + a.n_vertices])
+    chart = np.r_[np.zeros(a.n_faces, int), np.ones(b.n_faces, int)]
+    cm = fl.chart_mesh(V, F, chart)
+    uv0 = fl.convex_start(cm)
+    on = cm.uv_chart == 1
+    c = uv0[on].mean(0)
+    r = np.linalg.norm(uv0[on] - c, axis=1, keepdims=True)
+    uv0[on] = c + (uv0[on] - c) * (r / r.max()) ** -0.7
+    return cm, uv0
+
+
+def test_blockwise_search_steps_each_piece_on_its_own(two_charts):
+    """One piece's flip-free bound no longer caps the other piece's step; every piece's
+    energy decreases (Armijo) and nothing flips."""
+    from jaxparam.optimize import newton as nt, problem as pb, search
+    cm, uv0 = two_charts
+    en = jp.energies.get("symmetric_dirichlet")
+    plain = pb.Problem(cm.mesh, en, True, uv0)
+    blocked = pb.Problem(cm.mesh, en, True, uv0, face_blocks=cm.chart)
+    x = np.asarray(plain.x0)
+    f, g = plain.value_and_grad(x)
+    vals = nt.sparse_hessian(plain, x)
+    vals[plain.hessian_pattern.diag] += 1e-8 * vals[plain.hessian_pattern.diag].mean()
+    d = -jp.sparse.factorize(plain.hessian_pattern.pattern, vals, symmetric=True).solve(g)
+    steps = plain.face_energies_and_steps(x, d)[1][:cm.mesh.n_faces]
+    bound = [steps[cm.chart == k].min() for k in (0, 1)]
+    assert bound[1] < 1.0 < bound[0]               # the warped chart flips first
+    x1, f1, t1 = search.flip_free_armijo(plain, x, f, g, d)
+    x2, f2, t2 = search.flip_free_armijo(blocked, x, f, g, d)
+    assert t1 <= bound[1] and t2 == 1.0
+    dof_chart = np.repeat(cm.uv_chart[plain.free], 2)
+    np.testing.assert_array_equal(x2[dof_chart == 0], x[dof_chart == 0] + d[dof_chart == 0])
+    step1 = (x2 - x)[dof_chart == 1] / d[dof_chart == 1]
+    assert 0 < np.nanmax(step1) <= bound[1] * (1 + 1e-12)
+    assert blocked.flipped(x2) == 0 and f2 < f1 < f
+    e0, _ = blocked.face_energies(x)
+    e2, _ = blocked.face_energies(x2)
+    for k in (0, 1):
+        on = blocked.blocks.face == k
+        assert e2[on].sum() < e0[on].sum()
+    assert f2 == pytest.approx(e2.sum(), rel=1e-12) and f2 == pytest.approx(blocked.value(x2), rel=1e-12)
+
+
+def test_blockwise_newton_reaches_each_charts_own_minimum(two_charts):
+    """Minimizing the chart mesh with a step per chart gives each chart the minimum it has
+    when minimized alone, in no more iterations than one shared step."""
+    from jaxparam.atlas import flatten as fl
+    cm, uv0 = two_charts
+    en = jp.energies.get("symmetric_dirichlet")
+    uv, res = fl.minimize_charts(cm, en, uv0)
+    prob = jp.optimize.Problem(cm.mesh, en, True, uv0)
+    shared = jp.optimize.solver_from("newton").run(prob, jp.optimize.StopRules(), verbose=False)
+    assert res.converged and res.iterations <= shared.iterations
+    for k in (0, 1):
+        sub, ids = fl.sub_mesh(cm, k)
+        alone = jp.minimize(sub, "symmetric_dirichlet", init=uv0[ids], free_boundary=True,
+                            energy_rtol=1e-14, verbose=False)
+        assert float(en(sub, uv[ids])) == pytest.approx(alone.energy, rel=1e-7)
+        assert jp.distortion(sub, uv[ids]).flips == 0
+
+
+def test_face_energies_sum_to_the_energy(two_charts):
+    """The per-face terms of the blockwise search, on all faces or on a subset (bucketed
+    gather), agree with each other and sum to the energy."""
+    cm, uv0 = two_charts
+    prob = jp.optimize.Problem(cm.mesh, jp.energies.get("symmetric_dirichlet"), True, uv0,
+                               face_blocks=cm.chart)
+    x = np.asarray(prob.x0)
+    e, area = prob.face_energies(x)
+    assert e.sum() == pytest.approx(prob.value(x), rel=1e-13)
+    assert np.all(area[:cm.mesh.n_faces] > 0)
+    sub = prob.blocks.faces_of(np.array([1]))
+    assert sorted(sub.tolist()) == np.flatnonzero(cm.chart == 1).tolist()
+    e1, a1 = prob.face_energies_of(x, sub)
+    np.testing.assert_allclose(e1, e[sub], rtol=1e-14, atol=0)
+    np.testing.assert_array_equal(a1, area[sub])
+    e2, steps = prob.face_energies_and_steps(x, np.ones_like(x))
+    np.testing.assert_allclose(e2, e, rtol=1e-14, atol=0)

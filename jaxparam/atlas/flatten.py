@@ -111,9 +111,10 @@ def rescale(cm: ChartMesh, uv: np.ndarray) -> np.ndarray:
 def minimize_charts(cm: ChartMesh, energy, uv0: np.ndarray, *, solver="newton",
                     max_iters: int = 200, max_seconds: float | None = None):
     """Minimize ``energy`` (a :class:`~jaxparam.Energy`) over every chart at once, free
-    boundary, flip-free, from ``uv0 (n_uv, 2)`` (one-to-one chart by chart).
+    boundary, flip-free, from ``uv0 (n_uv, 2)`` (one-to-one chart by chart); each chart
+    takes its own step (:attr:`Problem.blocks <jaxparam.optimize.Problem>`).
     **Returns:** ``(uv (n_uv, 2), SolveResult)``."""
-    prob = Problem(cm.mesh, energy, True, uv0)
+    prob = Problem(cm.mesh, energy, True, uv0, face_blocks=cm.chart)
     res = solver_from(solver).run(prob, StopRules(max_iters=max_iters, max_seconds=max_seconds),
                                   verbose=False)
     return np.array(prob.uv(res.x)), res
@@ -144,7 +145,8 @@ def chart_quality(cm: ChartMesh, uv: np.ndarray) -> dict:
 
 def self_overlaps(cm: ChartMesh, uv: np.ndarray) -> np.ndarray:
     """``(c,) int``: boundary self-crossings of each chart's UVs (the charts are moved
-    apart along u first, so crossings between charts are not counted)."""
+    apart along u first, so crossings between charts are not counted; each crossing is
+    counted for the chart of its edges)."""
     lo = np.full((cm.n_charts, 2), np.inf)
     hi = np.full((cm.n_charts, 2), -np.inf)
     np.minimum.at(lo, cm.uv_chart, uv)
@@ -154,14 +156,9 @@ def self_overlaps(cm: ChartMesh, uv: np.ndarray) -> np.ndarray:
     shift = np.cumsum(np.r_[0.0, width[:-1] + gap]) - lo[:, 0]
     U = uv.copy()
     U[:, 0] += shift[cm.uv_chart]
-    t = cm.mesh.topology
-    out = np.zeros(cm.n_charts, int)
-    total = metrics.boundary_overlaps(cm.mesh, U)
-    if total:
-        for k in np.unique(cm.uv_chart[np.concatenate(t.boundary_loops)]):
-            sub = sub_mesh(cm, k)
-            out[k] = metrics.boundary_overlaps(sub[0], uv[sub[1]])
-    return out
+    segments, pairs = metrics.boundary_crossings(cm.mesh, U)
+    owner = cm.uv_chart[segments[pairs[:, 0], 0]]
+    return np.bincount(owner, minlength=cm.n_charts).astype(int)
 
 
 def sub_mesh(cm: ChartMesh, k: int):

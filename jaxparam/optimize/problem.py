@@ -21,11 +21,12 @@ from .. import energies as en_mod
 from .. import geometry as geo
 from .. import sparse
 from ..errors import SolverError
-from .padding import Padded, pad_positions, padded_arrays
+from .padding import Padded, bucket, pad_positions, padded_arrays
 
 __all__ = ["Problem", "HessianPattern", "uv_of", "energy_at", "energy_value",
            "energy_value_and_grad", "count_flipped", "max_step_along", "jacobian_maps",
-           "free_vertices", "normalized", "hessian_pattern"]
+           "free_vertices", "normalized", "hessian_pattern", "face_energies", "face_energies_of", "face_energies_and_steps",
+           "Blocks"]
 
 
 def free_vertices(topology, free_boundary: bool) -> np.ndarray:
@@ -73,6 +74,35 @@ def max_step_along(x, d, base, free, F):
     """:func:`jaxparam.geometry.max_step` from ``x`` along the free-DOF direction ``d``."""
     D = jnp.zeros_like(base).at[free].set(d.reshape(-1, 2))
     return geo.max_step(uv_of(x, base, free), D, F)
+
+
+@functools.partial(jax.jit, static_argnames=("en",))
+def face_energies(x, base, free, F, frames, areas, params, *, en):
+    """Per face at ``x``: ``(terms (m,), signed UV areas (m,))``, the terms ``|T| f_T``
+    (divided by ``sum |T|``, they sum to the mesh energy)."""
+    uv = uv_of(x, base, free)
+    dens = jax.vmap(en.densities(params).density)(frames, uv[F])
+    return areas * dens, geo.signed_areas(uv, F)
+
+
+@functools.partial(jax.jit, static_argnames=("en",))
+def face_energies_of(x, base, free, F, frames, areas, idx, params, *, en):
+    """:func:`face_energies` on the faces ``idx (j,)`` only, the terms not yet divided by
+    the total weight: ``(|T| f_T (j,), signed UV areas (j,))``."""
+    uv = uv_of(x, base, free)
+    Fi = F[idx]
+    dens = jax.vmap(en.densities(params).density)(frames[idx], uv[Fi])
+    return areas[idx] * dens, geo.signed_areas(uv, Fi)
+
+
+@functools.partial(jax.jit, static_argnames=("en",))
+def face_energies_and_steps(x, d, base, free, F, frames, areas, params, *, en):
+    """:func:`face_energies`' terms at ``x`` and :func:`jaxparam.geometry.max_steps` (per
+    face) from ``x`` along ``d``: ``(terms (m,), steps (m,))``."""
+    D = jnp.zeros_like(base).at[free].set(d.reshape(-1, 2))
+    uv = uv_of(x, base, free)
+    dens = jax.vmap(en.densities(params).density)(frames, uv[F])
+    return areas * dens, geo.max_steps(uv, D, F)
 
 
 @jax.jit
@@ -144,6 +174,36 @@ def hessian_pattern(topology, free: bytes) -> HessianPattern:
     return HessianPattern(sparse.Pattern(indptr, cols, N), pos.reshape(-1), diag)
 
 
+@dataclass(frozen=True)
+class Blocks:
+    """A problem made of disconnected pieces (e.g. an atlas's charts): its energy is the sum
+    of the pieces' energies and no face couples two pieces, so each piece can take its own
+    step (:func:`jaxparam.optimize.search.flip_free_armijo`).
+
+    **Fields:** ``face (M,)`` each padded face's piece (the ghost faces in piece ``n``),
+    ``dof (2 k,)`` each free DOF's piece, ``n`` the piece count; ``order (M,)`` the faces
+    sorted by piece and ``starts (n + 1,)`` where each piece begins in it (every piece,
+    the ghosts' included, has a face)."""
+
+    face: np.ndarray
+    dof: np.ndarray
+    n: int
+    order: np.ndarray
+    starts: np.ndarray
+
+    def face_min(self, values: np.ndarray) -> np.ndarray:
+        """``(n + 1,)``: the smallest of ``values (M,)`` over each piece's faces."""
+        return np.minimum.reduceat(values[self.order], self.starts)
+
+    def faces_of(self, pieces: np.ndarray) -> np.ndarray:
+        """The faces of ``pieces (j,)`` (int), piece after piece."""
+        pieces = np.asarray(pieces, np.int64)
+        ends = np.r_[self.starts[1:], self.order.size][pieces]
+        cnt = ends - self.starts[pieces]
+        pos = np.repeat(self.starts[pieces] - (np.cumsum(cnt) - cnt), cnt) + np.arange(cnt.sum())
+        return self.order[pos]
+
+
 class Problem:
     """Everything about one minimization that does not change between iterations.
 
@@ -159,9 +219,12 @@ class Problem:
 
     ``areas (m,)``, when given, replaces the 3D areas as each face's weight in the energy's
     sum (e.g. :func:`jaxparam.remesh.area_aware_map`'s per-face density weights).
+
+    ``face_blocks (m,) int``, when given, labels pieces of the mesh that share no vertex
+    (the atlas's charts): the line search then steps each piece on its own (:attr:`blocks`).
     """
 
-    def __init__(self, mesh, en, free_boundary: bool, uv0, areas=None):
+    def __init__(self, mesh, en, free_boundary: bool, uv0, areas=None, face_blocks=None):
         t = mesh.topology
         self.mesh, self.en = mesh, en.static
         self.params = jax.tree_util.tree_map(jnp.asarray, en.params)
@@ -176,6 +239,27 @@ class Problem:
         self.base = jax.device_put(base)
         self.x0 = jax.device_put(base[self.free].reshape(-1))
         self.free_boundary = free_boundary
+        self._face_blocks = None if face_blocks is None else np.asarray(face_blocks, np.int64)
+
+    @functools.cached_property
+    def blocks(self) -> Blocks | None:
+        """The :class:`Blocks` of ``face_blocks`` (``None`` without): the pieces of the
+        padded faces and of the free DOFs."""
+        if self._face_blocks is None:
+            return None
+        fb, F = self._face_blocks, np.asarray(self.F)
+        n = int(fb.max()) + 1 if fb.size else 0
+        vb = np.full(self.mesh.n_vertices, n, np.int64)
+        vb[F.reshape(-1)] = np.repeat(fb, 3)
+        M = int(self.padded.F.shape[0])
+        face = np.full(M + 1, n, np.int64)          # one ghost slot more: piece n has a face
+        face[:fb.size] = fb
+        order = np.argsort(face[:M], kind="stable")
+        starts = np.searchsorted(face[:M][order], np.arange(n + 1))
+        if M == fb.size:                            # no ghost face: piece n borrows face 0
+            order, starts = np.r_[order, 0], np.r_[starts[:n], M]
+        return Blocks(face=face[:M], dof=np.repeat(vb[self.free], 2), n=n, order=order,
+                      starts=starts)
 
     @functools.cached_property
     def frames(self):
@@ -232,6 +316,38 @@ class Problem:
         """The largest flip-free step from ``x`` along ``d`` (``inf`` when unbounded)."""
         p = self.padded
         return float(max_step_along(p.x(x), p.x(d), p.base, p.free, p.F))
+
+    def face_energies(self, x):
+        """``(terms (M,), signed areas (M,))`` at ``x`` on the padded faces, the terms
+        ``|T| f_T / sum |T|`` summing to the energy (:func:`face_energies`; the ghost
+        faces' terms are 0, their areas positive)."""
+        p = self.padded
+        e, a = face_energies(p.x(x), *self.padded_arrays, en=self.en)
+        return np.asarray(e) / self._total_weight, np.asarray(a)
+
+    def face_energies_of(self, x, faces: np.ndarray):
+        """:meth:`face_energies` on the padded faces ``faces (j,)`` alone: ``(terms (j,),
+        signed areas (j,))``, evaluated at a bucketed length (:func:`face_energies_of`)."""
+        faces = np.asarray(faces, np.int64)
+        j = faces.size
+        idx = np.full(bucket(j), faces[0] if j else 0, np.int64)
+        idx[:j] = faces
+        e, a = face_energies_of(self.padded.x(x), *self.padded_arrays[:5], jax.device_put(idx),
+                                self.params, en=self.en)
+        return np.asarray(e)[:j] / self._total_weight, np.asarray(a)[:j]
+
+    @functools.cached_property
+    def _total_weight(self) -> float:
+        return float(np.sum(np.asarray(self.padded.areas)))
+
+    def face_energies_and_steps(self, x, d):
+        """``(terms (M,), steps (M,))``: :meth:`face_energies`' terms at ``x`` and each
+        padded face's largest flip-free step from ``x`` along ``d``."""
+        p = self.padded
+        base, free, F, frames, areas, params = self.padded_arrays
+        e, t = face_energies_and_steps(p.x(x), p.x(d), base, free, F, frames, areas, params,
+                                       en=self.en)
+        return np.asarray(e) / self._total_weight, np.asarray(t)
 
     @functools.cached_property
     def jacobian_maps(self):
