@@ -118,3 +118,19 @@ def test_both_starts_give_valid_atlases(start):
     a = jp.atlas(mesh, start=start, compact=0.0, verbose=False)
     assert a.stats.flips == 0 and a.stats.overlaps == 0
     assert a.stats.sym_dirichlet < 4.2
+
+
+def test_cli_start_option(tmp_path, capsys):
+    """``jaxparam atlas --start``: the two names, and a wrong one refused by the parser
+    before any work, naming the choices."""
+    from jaxparam.cli import main
+    src = tmp_path / "t.obj"
+    jp.save(src, jp.shapes.torus(12, 6))
+    with pytest.raises(SystemExit) as e:
+        main(["atlas", str(src), "-o", str(tmp_path / "o.obj"), "--start", "circle"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "conformal" in err and "convex" in err
+    with pytest.raises(SystemExit):
+        main(["atlas", "--help"])
+    assert "--start" in capsys.readouterr().out

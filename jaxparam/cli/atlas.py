@@ -37,6 +37,9 @@ def add_atlas_parser(sub, command) -> None:
                  "from cutting concave charts so they pack tighter (0: none)", type=float)
     add_named(p, "--energy", sorted(ENERGIES), default_of(atlas, "energy"),
               "distortion energy each chart's map minimizes")
+    add_named(p, "--start", ("conformal", "convex"), default_of(atlas, "start"),
+              "each chart's start: its least-squares conformal map (the convex one where that "
+              "folds) or its convex-combination map")
 
 
 def report_of(mesh, a, seconds: dict) -> dict:
@@ -81,7 +84,8 @@ def cmd_atlas(args) -> int:
     mesh = load(args.mesh)
     clock("load")
     a = atlas(mesh, energy=canonical(args.energy), texture_size=args.texture_size,
-              margin_texels=args.margin_texels, cone=args.cone, compact=args.compact)
+              margin_texels=args.margin_texels, cone=args.cone, compact=args.compact,
+              start=canonical(args.start))
     clock("atlas")
     written = []
     try:

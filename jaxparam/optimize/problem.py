@@ -25,8 +25,8 @@ from .padding import Padded, bucket, pad_positions, padded_arrays
 
 __all__ = ["Problem", "HessianPattern", "uv_of", "energy_at", "energy_value",
            "energy_value_and_grad", "count_flipped", "max_step_along", "jacobian_maps",
-           "free_vertices", "normalized", "hessian_pattern", "face_energies", "face_energies_of", "face_energies_and_steps",
-           "Blocks"]
+           "free_vertices", "normalized", "hessian_pattern", "face_energies", "face_energies_of",
+           "face_energies_and_steps", "Blocks"]
 
 
 def free_vertices(topology, free_boundary: bool) -> np.ndarray:
