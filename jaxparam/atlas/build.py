@@ -139,8 +139,9 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
     - ``start``: each chart's start, ``"conformal"`` (the default: its least-squares
       conformal map, :mod:`~jaxparam.atlas.lscm`, or its convex-combination map where that
       inverts a triangle) or ``"convex"`` (the convex-combination map, boundary on a
-      circle).  Both are flip-free; from the conformal start the minimization needs about
-      half the Newton steps (cow refined 3 times: 10 against 18).
+      circle).  Both are flip-free.  The conformal start is far closer to the optimum
+      (cow refined once: energy 4.03 against 319, 10 Newton steps against 19); at 1.41M
+      faces the atlas took 310 s against 390 s, with 238 charts against 296.
     - ``weights``, ``solver``, ``max_iters``: the convex-combination start's weights and
       the minimization's solver and iteration cap.
     - ``verbose``: a progress bar over the stages (charts, flatten and its split rounds,

@@ -1,11 +1,13 @@
 """Every chart's least-squares conformal map at once: the start of the atlas's minimization.
 
 A convex-combination start puts each chart's boundary on a circle, far from the free
-boundary's optimum: on cow refined 3 times (353k faces) its symmetric Dirichlet energy is
-1006 (4 at an isometry), and Newton spends half of its 18 steps undoing the circle.  The
-least-squares conformal map (Lévy et al. 2002; the conformal energy of the survey's §6,
-quadratic in the UVs) lets the boundary go where the chart's shape wants it: 4.05 there,
-and 10 Newton steps.
+boundary's optimum: on cow refined once (22k faces, 161 charts) its symmetric Dirichlet
+energy is 319 (4 at an isometry) and Newton takes 19 steps.  The least-squares conformal map
+(Lévy et al. 2002; the conformal energy of the survey's §6, quadratic in the UVs) lets the
+boundary go where the chart's shape wants it: 4.03 there, and 10 steps.  Where a chart's
+conformal map folds, the chart keeps the circle, and such charts then set the step count
+(the atlas's charts of cow refined 3 times: 2549 -> 1025, 18 -> 17 steps;
+benchmarks/README.md).
 
 Per triangle, in its own frame (corners ``(x_j, y_j)``, area ``A``), conformality is one
 complex equation ``sum_j W_j (u_j + i v_j) = 0`` with ``W_j = ((x_{j+2} - x_{j+1}) + i
