@@ -17,7 +17,7 @@ import numpy as np
 from . import tol
 
 __all__ = ["safe_norm", "corner_geometry",  "weights_from_angles", "shape_preserving_weights",
-           "face_quantities", "circle", "signed_areas", "face_areas"]
+           "frame_coordinates", "face_quantities", "circle", "signed_areas", "face_areas"]
 
 
 def safe_norm(x, axis=-1):
@@ -115,16 +115,23 @@ def face_areas(V, F) -> np.ndarray:
     return 0.5 * safe_norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]))
 
 
-def face_quantities(V, F, uv) -> dict:
-    """Twin of :func:`jaxparam.metrics.face_distortion`: ``J (m, 2, 2)``, signed ``s1``, ``s2``,
-    ``area3d`` and signed ``area_uv`` (``(m,)`` each), from ``V (n, 3)``, ``F (m, 3)``,
-    ``uv (n, 2)``, through the same local frames as :func:`jaxparam.geometry.jacobians`."""
+def frame_coordinates(V, F):
+    """Twin of :func:`jaxparam.geometry.local_frames`: each face of ``V (n, 3)``, ``F (m,
+    3)`` in its own frame, corners ``(0, 0)``, ``(l1, 0)``, ``(x2, y2)``.  **Returns:**
+    ``(l1, x2, y2, n)``: ``(m,)`` each, and the normals ``n = e1 x e2 (m, 3)`` (``|n|`` is
+    twice the area)."""
     P = V[F]
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     l1 = safe_norm(e1)
     n = np.cross(e1, e2)
-    x2 = np.sum(e1 * e2, -1) / l1
-    y2 = safe_norm(n) / l1
+    return l1, np.sum(e1 * e2, -1) / l1, safe_norm(n) / l1, n
+
+
+def face_quantities(V, F, uv) -> dict:
+    """Twin of :func:`jaxparam.metrics.face_distortion`: ``J (m, 2, 2)``, signed ``s1``, ``s2``,
+    ``area3d`` and signed ``area_uv`` (``(m,)`` each), from ``V (n, 3)``, ``F (m, 3)``,
+    ``uv (n, 2)``, through the same local frames as :func:`jaxparam.geometry.jacobians`."""
+    l1, x2, y2, n = frame_coordinates(V, F)
     Q = uv[F]
     q1, q2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
     det = l1 * y2                                   # frame columns (l1, 0) and (x2, y2)

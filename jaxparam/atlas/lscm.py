@@ -65,11 +65,7 @@ def conformal_map(cm: ChartMesh) -> np.ndarray:
     t = cm.mesh.topology
     F = t.faces
     m = F.shape[0]
-    P = V[F]
-    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    l1 = np.linalg.norm(e1, axis=1)
-    x2 = np.sum(e1 * e2, 1) / l1
-    y2 = np.linalg.norm(np.cross(e1, e2), axis=1) / l1
+    l1, x2, y2, _ = host.frame_coordinates(V, F)
     X = np.stack([np.zeros(m), l1, x2], 1)
     Y = np.stack([np.zeros(m), np.zeros(m), y2], 1)
     s = 1.0 / np.sqrt(l1 * y2)                                  # 1 / sqrt(2 A)

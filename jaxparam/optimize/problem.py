@@ -76,23 +76,27 @@ def max_step_along(x, d, base, free, F):
     return geo.max_step(uv_of(x, base, free), D, F)
 
 
+def _weighted_densities(uv, F, frames, areas, params, en):
+    """``|T| f_T (m,)``: each face's weight times its density (:func:`jaxparam.energies.total`'s
+    terms before the division by ``sum |T|``)."""
+    return areas * jax.vmap(en.densities(params).density)(frames, uv[F])
+
+
 @functools.partial(jax.jit, static_argnames=("en",))
 def face_energies(x, base, free, F, frames, areas, params, *, en):
     """Per face at ``x``: ``(terms (m,), signed UV areas (m,))``, the terms ``|T| f_T``
     (divided by ``sum |T|``, they sum to the mesh energy)."""
     uv = uv_of(x, base, free)
-    dens = jax.vmap(en.densities(params).density)(frames, uv[F])
-    return areas * dens, geo.signed_areas(uv, F)
+    return _weighted_densities(uv, F, frames, areas, params, en), geo.signed_areas(uv, F)
 
 
 @functools.partial(jax.jit, static_argnames=("en",))
 def face_energies_of(x, base, free, F, frames, areas, idx, params, *, en):
-    """:func:`face_energies` on the faces ``idx (j,)`` only, the terms not yet divided by
-    the total weight: ``(|T| f_T (j,), signed UV areas (j,))``."""
+    """:func:`face_energies` on the faces ``idx (j,)`` only: ``(|T| f_T (j,), signed UV
+    areas (j,))``."""
     uv = uv_of(x, base, free)
-    Fi = F[idx]
-    dens = jax.vmap(en.densities(params).density)(frames[idx], uv[Fi])
-    return areas[idx] * dens, geo.signed_areas(uv, Fi)
+    return (_weighted_densities(uv, F[idx], frames[idx], areas[idx], params, en),
+            geo.signed_areas(uv, F[idx]))
 
 
 @functools.partial(jax.jit, static_argnames=("en",))
@@ -101,8 +105,7 @@ def face_energies_and_steps(x, d, base, free, F, frames, areas, params, *, en):
     face) from ``x`` along ``d``: ``(terms (m,), steps (m,))``."""
     D = jnp.zeros_like(base).at[free].set(d.reshape(-1, 2))
     uv = uv_of(x, base, free)
-    dens = jax.vmap(en.densities(params).density)(frames, uv[F])
-    return areas * dens, geo.max_steps(uv, D, F)
+    return _weighted_densities(uv, F, frames, areas, params, en), geo.max_steps(uv, D, F)
 
 
 @jax.jit
