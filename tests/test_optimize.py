@@ -297,6 +297,24 @@ def test_padded_kernels_equal_unpadded(mesh, start, free, energy):
 
 
 @pytest.mark.parametrize("free", [False, True])
+def test_host_assembly_equals_the_device_scatter(mesh, start, free, monkeypatch):
+    """On the CPU the face Hessians are summed by :attr:`Problem.assembly` (a SciPy CSR
+    product); elsewhere by the device scatter.  Both give the same values, and every face
+    entry lands in at most one slot."""
+    from jaxparam.optimize import newton as nt, problem as pb
+    prob = pb.Problem(mesh, jp.energies.get("symmetric_dirichlet"), free, start)
+    A = prob.assembly
+    assert A.shape == (prob.hessian_pattern.pattern.nnz, prob.padded.F.shape[0] * 36)
+    assert np.all(np.diff(A.tocsc().indptr) <= 1) and np.all(A.data == 1.0)
+    x = np.asarray(prob.x0) * 1.01
+    host = nt.sparse_hessian(prob, x)
+    monkeypatch.setattr(nt.jax, "default_backend", lambda: "gpu")
+    device = nt.sparse_hessian(prob, x)
+    np.testing.assert_allclose(host, device, rtol=0, atol=1e-14 * np.abs(device).max())
+    assert host.flags.writeable
+
+
+@pytest.mark.parametrize("free", [False, True])
 def test_similar_meshes_share_compiled_kernels(free):
     """Two meshes of different sizes in the same buckets minimize with the kernels the
     first one compiled: no new entry in any jit cache."""
