@@ -452,3 +452,44 @@ def test_face_energies_sum_to_the_energy(two_charts):
     np.testing.assert_array_equal(a1, area[sub])
     e2, steps = prob.face_energies_and_steps(x, np.ones_like(x))
     np.testing.assert_allclose(e2, e, rtol=1e-14, atol=0)
+
+
+def test_free_boundary_default_start_is_the_conformal_map():
+    """With a free boundary and a scale-dependent energy, ``minimize`` starts from the
+    least-squares conformal map: on a developable patch (a 3/4 turn of a cylinder) that is
+    an isometry already, so Newton is done in a step or two at the isometry's energy (4),
+    where the convex map's circle needs many."""
+    from jaxparam.optimize import driver
+    m = jp.shapes.cylinder_patch(16, 8)
+    start = driver.conformal_start(m)
+    assert start is not None
+    a3 = float(np.sum(jp.host.face_areas(np.asarray(m.vertices), m.faces)))
+    auv = float(np.sum(jp.host.signed_areas(start, m.faces)))
+    scaled = start * np.sqrt(a3 / auv)        # minimize's rescaling to the 3D area
+    assert float(jp.energies.get("symmetric_dirichlet")(m, scaled)) == pytest.approx(4.0, abs=1e-9)
+    res = jp.minimize(m, "symmetric_dirichlet", free_boundary=True, verbose=False)
+    convex = jp.minimize(m, "symmetric_dirichlet", free_boundary=True, verbose=False,
+                         init=jp.convex_map(m))
+    assert res.iterations <= 2 < convex.iterations
+    assert res.energy == pytest.approx(4.0, abs=1e-9) and res.flips == 0
+    assert res.energy <= convex.energy + 1e-12
+
+
+def test_free_boundary_start_falls_back_to_the_convex_map(monkeypatch):
+    """Where the conformal map folds a triangle (or crosses its own boundary), the start is
+    the convex map; a clockwise conformal map is mirrored, not refused; a fixed boundary and
+    a scale-invariant energy keep the convex map."""
+    from jaxparam.optimize import driver
+    m = jp.shapes.plane_grid(8, 8, jitter=0.2)
+    good = driver.conformal_map(m.vertices, m.topology, np.zeros(m.n_vertices, np.int64), 1)
+    folded = good.copy()
+    folded[m.topology.interior[0]] = good[m.topology.boundary[0]] * 3.0
+    monkeypatch.setattr(driver, "conformal_map", lambda *a: folded.copy())
+    assert driver.conformal_start(m) is None
+    np.testing.assert_array_equal(driver.default_start(m, True, False), np.asarray(jp.convex_map(m)))
+    monkeypatch.setattr(driver, "conformal_map", lambda *a: good * np.array([1.0, -1.0]))
+    mirrored = driver.conformal_start(m)
+    assert mirrored is not None and np.all(jp.host.signed_areas(mirrored, m.faces) > 0)
+    monkeypatch.setattr(driver, "conformal_map", lambda *a: pytest.fail("not asked for"))
+    np.testing.assert_array_equal(driver.default_start(m, False, False), np.asarray(jp.convex_map(m)))
+    np.testing.assert_array_equal(driver.default_start(m, True, True), np.asarray(jp.convex_map(m)))

@@ -16,12 +16,14 @@ from .. import tol
 from ..host import face_areas as host_face_areas, signed_areas as host_signed_areas
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
+from ..mesh import TriMesh
 from .base import Solver, StopRules
+from .conformal import conformal_map
 from .implicit import is_traced, minimize_traced
 from .problem import Problem
 from .solvers import solver_from
 
-__all__ = ["MinimizeResult", "minimize", "check_start"]
+__all__ = ["MinimizeResult", "minimize", "check_start", "conformal_start", "default_start"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,38 @@ def _concrete(a):
         return None
 
 
+def conformal_start(mesh) -> np.ndarray | None:
+    """The default start of a free-boundary :func:`minimize`: the mesh's least-squares
+    conformal map (:func:`jaxparam.optimize.conformal.conformal_map`, two boundary vertices pinned, one
+    sparse solve on the minimization's own Hessian pattern), mirrored when it came out
+    clockwise.  **Returns:** ``uv (n, 2)`` (NaN rows for vertices in no face), or ``None``
+    where the map inverts or flattens a triangle, is not finite or crosses its own boundary
+    (a convex-combination map is one-to-one; this one need not be)."""
+    t = mesh.topology
+    uv = conformal_map(mesh.vertices, t, np.zeros(t.n_vertices, np.int64), 1)
+    if not np.all(np.isfinite(uv)):
+        return None
+    area = host_signed_areas(uv, mesh.faces)
+    if np.all(area < 0):
+        uv[:, 1] *= -1.0
+        area = -area
+    if not np.all(area > 0) or metrics.boundary_overlaps(mesh, uv) > 0:
+        return None
+    uv[~t.referenced] = np.nan
+    return uv
+
+
+def default_start(mesh, free_boundary: bool, scale_invariant: bool):
+    """:func:`minimize`'s start when ``init`` is None: with a free boundary and an energy
+    that is not scale-invariant the :func:`conformal_start` where it is one-to-one, else
+    ``convex_map(mesh)``.  (A scale-invariant energy's optimum takes its scale and centroid
+    from the start, so its start stays the convex map, differentiable in the vertices.)"""
+    from ..linear import convex_map
+
+    uv = conformal_start(mesh) if free_boundary and not scale_invariant else None
+    return convex_map(mesh) if uv is None else uv
+
+
 def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bool = False,
              solver: str | Solver = "newton", max_iters: int = 200,
              energy_rtol: float = tol.ENERGY_RTOL, grad_rtol: float = tol.GRAD_RTOL,
@@ -88,8 +122,13 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
     - ``energy``: a name (``"symmetric_dirichlet"``, ``"mips"``, ``"angle"``, ...) or
       ``jp.energy(f)`` (``jp.energy(f, params)`` for one with parameters).
     - ``init``: ``(n, 2)`` one-to-one start; default ``convex_map(mesh)``
-      (shape-preserving weights, circle).  With ``free_boundary`` and a
-      scale-dependent energy the start is rescaled to the 3D area.
+      (shape-preserving weights, circle), and with ``free_boundary`` and an energy that is
+      not scale-invariant (``symmetric_dirichlet``, ``arap``, ...) the least-squares
+      conformal map where that is one-to-one (:func:`conformal_start`: no folded triangle,
+      no boundary self-crossing), which lets the boundary start near where it ends (Newton,
+      symmetric Dirichlet: camelhead 56 -> 19 steps, snail x16 14 -> 6; under ``jax.jit``
+      and ``jax.vmap``, where the vertices have no value yet, the convex map).  With
+      ``free_boundary`` and a scale-dependent energy the start is rescaled to the 3D area.
     - ``free_boundary``: let the boundary move (False: the start's boundary stays).
     - ``solver``: a name of :data:`jaxparam.optimize.SOLVERS` (``"newton"``, ``"lbfgs"``,
       ``"bfgs"``, ``"jaxopt_lbfgs"``; hyphens allowed), or a solver instance with its own
@@ -132,7 +171,7 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
         res.uv, res.energy, res.iterations
     """
     mesh = as_mesh(mesh, "minimize")
-    from ..linear import convex_map, disk_check
+    from ..linear import disk_check
 
     en = en_mod.get(energy)
     if en_mod.captures_tracer(en):
@@ -155,7 +194,7 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
     if is_traced((mesh.vertices, init, en.params)):
         return _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, strict)
     if init is None:
-        init = convex_map(mesh)
+        init = default_start(mesh, free_boundary, en.scale_invariant)
     uv0 = np.asarray(init, np.float64)
     if uv0.shape != (mesh.n_vertices, 2):
         raise MeshError(f"minimize: init must have shape ({mesh.n_vertices}, 2), got {uv0.shape}.")
@@ -183,7 +222,13 @@ def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, stric
     from ..linear import convex_map
 
     if init is None:
-        init = convex_map(mesh)
+        # A free boundary's optimum does not depend on the start (its rows' gradient is 0;
+        # for an energy that is not scale-invariant, not even through its scale), so the
+        # conformal start may be a constant; under jax.jit the vertices have no value.
+        V = _concrete(mesh.vertices) if free_boundary and not en.scale_invariant else None
+        uv = None if V is None else conformal_start(TriMesh(V, mesh.faces, mesh.topology,
+                                                            validate=False))
+        init = convex_map(mesh) if uv is None else uv
     init = jnp.asarray(init, jnp.float64)
     if init.shape != (mesh.n_vertices, 2):
         raise MeshError(f"minimize: init must have shape ({mesh.n_vertices}, 2), got {init.shape}.")
