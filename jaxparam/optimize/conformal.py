@@ -4,8 +4,9 @@ The start of a free-boundary minimization: :func:`jaxparam.minimize`'s default w
 ``free_boundary=True``, and every chart of :func:`jaxparam.atlas`
 (:mod:`jaxparam.atlas.lscm`).  A convex-combination start puts the boundary on a circle,
 far from where a free boundary's optimum puts it; the conformal map lets the boundary go
-where the surface's shape wants it (Newton from it, symmetric Dirichlet: camelhead 56 -> 19
-steps, snail x16 14 -> 6, bump-domain x4 19 -> 1; benchmarks/README.md, session 14).
+where the surface's shape wants it (Newton from it, symmetric Dirichlet, against the convex
+map: camelhead 25 -> 19 steps, snail x16 12 -> 5, bump-domain x4 19 -> 1; benchmarks/README.md,
+session 14).
 
 Per triangle, in its own frame (corners ``(x_j, y_j)``, area ``A``), conformality is one
 complex equation ``sum_j W_j (u_j + i v_j) = 0`` with ``W_j = ((x_{j+2} - x_{j+1}) + i
