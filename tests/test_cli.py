@@ -7,6 +7,7 @@ import pytest
 
 import jaxparam as jp
 from jaxparam.cli import main
+from jaxparam.cli.pipeline import flatten_mesh
 
 
 @pytest.fixture(scope="module")
@@ -395,3 +396,20 @@ def test_meshless_merges_duplicate_points_when_asked(tmp_path, capsys):
     assert main(["meshless", str(pts), "-o", str(out), "--merge-duplicates"]) == 0
     mesh = jp.load(out)
     assert mesh.n_vertices == len(P) + 5 and mesh.faces.max() < len(P)
+
+
+def test_flatten_free_boundary_starts_as_minimize_does(mesh_file, tmp_path):
+    """``flatten --free-boundary`` takes jp.minimize's start: the conformal map for symmetric
+    Dirichlet (here one-to-one), the convex map for the scale-invariant MIPS; the report
+    says which, and the symmetric Dirichlet result is jp.minimize's default one."""
+    rep = tmp_path / "r.json"
+    for energy, want in (("symmetric-dirichlet", "conformal-map"), ("mips", "convex-map")):
+        assert main(["-q", "flatten", str(mesh_file), "-o", str(tmp_path / "o.obj"), "--energy",
+                     energy, "--free-boundary", "--report", str(rep)]) == 0
+        r = json.loads(rep.read_text())
+        assert r["start"] == want and r["converged"] is True
+    mesh = jp.load(mesh_file)
+    res = jp.minimize(mesh, "symmetric_dirichlet", free_boundary=True, verbose=False)
+    uv, rep2 = flatten_mesh(mesh, energy="symmetric-dirichlet", free_boundary=True, say=lambda s: None)
+    assert rep2["start"] == "conformal-map"
+    np.testing.assert_allclose(uv, np.asarray(res.uv), rtol=0, atol=1e-12)

@@ -125,7 +125,9 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
                  free_boundary: bool = False, solver: str = "newton", max_iters: int = 200,
                  say: Callable[[str], object] = print, verbose: bool | None = None):
     """The flatten pipeline on a loaded disk mesh: a convex map, then, when ``energy`` is
-    given, :func:`jaxparam.minimize` from it; then the report.
+    given, :func:`jaxparam.minimize` from it (with ``free_boundary``, from the least-squares
+    conformal map where :func:`jaxparam.minimize`'s own default would take it: the report's
+    ``start`` says which); then the report.
 
     **Arguments:** ``mesh`` a disk-topology :class:`~jaxparam.TriMesh` (extra boundary loops
     are filled virtually; ``say`` gets a note); ``weights``, ``boundary``, ``spacing`` as
@@ -157,12 +159,20 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
     seconds("convex_map")
     weights_used = canonical(weights)
     if energy:
+        from ..energies import get as get_energy
         from ..optimize import minimize     # lazily: the optimize stack costs 0.2 s to import
+        from ..optimize.driver import conformal_start
 
-        res = minimize(mesh, canonical(energy), init=uv, free_boundary=free_boundary,
-                       solver=canonical(solver), max_iters=max_iters, verbose=verbose)
+        # jp.minimize's own rule for a free boundary: the conformal map where it is
+        # one-to-one and the energy is not scale-invariant; else the convex map above.
+        start = (conformal_start(mesh) if free_boundary
+                 and not get_energy(canonical(energy)).scale_invariant else None)
+        res = minimize(mesh, canonical(energy), init=uv if start is None else start,
+                       free_boundary=free_boundary, solver=canonical(solver),
+                       max_iters=max_iters, verbose=verbose)
         seconds("minimize")
         uv = np.asarray(res.uv)
+        extra["start"] = "convex-map" if start is None else "conformal-map"
         extra.update({"energy": float(res.energy), "iterations": int(res.iterations),
                       "converged": bool(res.converged), "energy_name": hyphenated(energy),
                       "solver": hyphenated(solver), "free_boundary": bool(free_boundary)})
