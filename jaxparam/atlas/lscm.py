@@ -14,14 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import host
 from ..optimize import conformal as _lscm
 from .flatten import ChartMesh, convex_start, rescale, self_overlaps
 
 __all__ = ["conformal_start", "conformal_map", "pinned_pairs"]
-
-PIN_PENALTY = _lscm.PIN_PENALTY
-
 
 def pinned_pairs(cm: ChartMesh) -> tuple[np.ndarray, np.ndarray]:
     """:func:`jaxparam.optimize.conformal.pinned_pairs` of the charts: ``(a, b)``, ``(c,)`` UV-vertex ids."""
@@ -42,15 +38,7 @@ def conformal_start(cm: ChartMesh, *, weights: str = "shape_preserving") -> np.n
     recentred and scaled to its 3D area (:func:`~jaxparam.atlas.flatten.rescale`).
     **Returns:** ``uv (n_uv, 2)``, flip-free chart by chart."""
     uv = conformal_map(cm)
-    F = cm.mesh.faces
-    area = host.signed_areas(uv, F)
-    neg = np.bincount(cm.chart, weights=(area < 0), minlength=cm.n_charts)
-    zero = np.bincount(cm.chart, weights=~(np.abs(area) > 0), minlength=cm.n_charts)   # NaN too
-    size = np.bincount(cm.chart, minlength=cm.n_charts)
-    mirror = (neg == size) & (zero == 0)
-    uv[mirror[cm.uv_chart], 1] *= -1.0
-    bad = ~mirror & ((neg > 0) | (zero > 0)) | ~np.isfinite(
-        np.bincount(cm.uv_chart, weights=uv.sum(1), minlength=cm.n_charts))
+    bad = _lscm.orient_disks(uv, cm.mesh.faces, cm.chart, cm.uv_chart, cm.n_charts)
     # A conformal map can cross its own boundary; the minimization would keep the fold
     # (its energy does not see it) and the chart would be split: start those on a circle.
     bad |= self_overlaps(cm, np.where(bad[cm.uv_chart, None], 0.0, uv)) > 0

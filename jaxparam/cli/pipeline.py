@@ -161,12 +161,10 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
     if energy:
         from ..energies import get as get_energy
         from ..optimize import minimize     # lazily: the optimize stack costs 0.2 s to import
-        from ..optimize.driver import conformal_start
+        from ..optimize.driver import free_start
 
-        # jp.minimize's own rule for a free boundary: the conformal map where it is
-        # one-to-one and the energy is not scale-invariant; else the convex map above.
-        start = (conformal_start(mesh) if free_boundary
-                 and not get_energy(canonical(energy)).scale_invariant else None)
+        # jp.minimize's own start where it does not take the convex map (computed above)
+        start = free_start(mesh, free_boundary, get_energy(canonical(energy)).scale_invariant)
         res = minimize(mesh, canonical(energy), init=uv if start is None else start,
                        free_boundary=free_boundary, solver=canonical(solver),
                        max_iters=max_iters, verbose=verbose)

@@ -28,7 +28,7 @@ from .. import host
 from .. import sparse
 from .problem import free_vertices, hessian_pattern
 
-__all__ = ["conformal_map", "pinned_pairs", "PIN_PENALTY"]
+__all__ = ["conformal_map", "pinned_pairs", "orient_disks", "PIN_PENALTY"]
 
 #: The pins' diagonal penalty, relative to the mean diagonal: the pinned UVs are met to
 #: about its inverse (relative), far below what the rescaling and the minimization see.
@@ -91,3 +91,20 @@ def conformal_map(vertices, topology, label: np.ndarray, n: int) -> np.ndarray:
     uv = np.zeros((t.n_vertices, 2))
     uv[free] = x.reshape(-1, 2)
     return uv
+
+
+def orient_disks(uv: np.ndarray, faces: np.ndarray, face_label: np.ndarray,
+                 vertex_label: np.ndarray, n: int) -> np.ndarray:
+    """Check :func:`conformal_map`'s disks one by one: a disk whose triangles all came out
+    clockwise is mirrored in place (``v -> -v``: a proper map of the other orientation, not
+    a fold).  **Returns:** ``bad (n,) bool``: the disks that still invert or flatten a
+    triangle, or have a non-finite UV (``face_label (m,)``, ``vertex_label (n_vertices,)``
+    the faces' and vertices' disks).  Boundary self-crossings are the caller's to check."""
+    area = host.signed_areas(uv, faces)
+    neg = np.bincount(face_label, weights=(area < 0), minlength=n)
+    zero = np.bincount(face_label, weights=~(np.abs(area) > 0), minlength=n)    # NaN too
+    size = np.bincount(face_label, minlength=n)
+    mirror = (neg == size) & (zero == 0)
+    uv[mirror[vertex_label], 1] *= -1.0
+    return ~mirror & ((neg > 0) | (zero > 0)) | ~np.isfinite(
+        np.bincount(vertex_label, weights=uv.sum(1), minlength=n))

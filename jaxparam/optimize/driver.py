@@ -18,12 +18,13 @@ from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
 from .base import Solver, StopRules
-from .conformal import conformal_map
+from .conformal import conformal_map, orient_disks
 from .implicit import is_traced, minimize_traced
 from .problem import Problem
 from .solvers import solver_from
 
-__all__ = ["MinimizeResult", "minimize", "check_start", "conformal_start", "default_start"]
+__all__ = ["MinimizeResult", "minimize", "check_start", "conformal_start", "free_start",
+           "default_start"]
 
 
 @dataclass(frozen=True)
@@ -84,27 +85,29 @@ def conformal_start(mesh) -> np.ndarray | None:
     where the map inverts or flattens a triangle, is not finite or crosses its own boundary
     (a convex-combination map is one-to-one; this one need not be)."""
     t = mesh.topology
-    uv = conformal_map(mesh.vertices, t, np.zeros(t.n_vertices, np.int64), 1)
-    if not np.all(np.isfinite(uv)):
-        return None
-    area = host_signed_areas(uv, mesh.faces)
-    if np.all(area < 0):
-        uv[:, 1] *= -1.0
-        area = -area
-    if not np.all(area > 0) or metrics.boundary_overlaps(mesh, uv) > 0:
+    label = np.zeros(t.n_vertices, np.int64)
+    uv = conformal_map(mesh.vertices, t, label, 1)
+    if orient_disks(uv, mesh.faces, np.zeros(mesh.n_faces, np.int64), label, 1)[0] or (
+            metrics.boundary_overlaps(mesh, uv) > 0):
         return None
     uv[~t.referenced] = np.nan
     return uv
 
 
+def free_start(mesh, free_boundary: bool, scale_invariant: bool) -> np.ndarray | None:
+    """The start :func:`minimize` takes instead of the convex map, or ``None``: with a free
+    boundary and an energy that is not scale-invariant, the :func:`conformal_start` where it
+    is one-to-one.  (A scale-invariant energy's optimum takes its scale and centroid from the
+    start, so its start stays the convex map, differentiable in the vertices.)"""
+    return conformal_start(mesh) if free_boundary and not scale_invariant else None
+
+
 def default_start(mesh, free_boundary: bool, scale_invariant: bool):
-    """:func:`minimize`'s start when ``init`` is None: with a free boundary and an energy
-    that is not scale-invariant the :func:`conformal_start` where it is one-to-one, else
-    ``convex_map(mesh)``.  (A scale-invariant energy's optimum takes its scale and centroid
-    from the start, so its start stays the convex map, differentiable in the vertices.)"""
+    """:func:`minimize`'s start when ``init`` is None: :func:`free_start` where there is
+    one, else ``convex_map(mesh)``."""
     from ..linear import convex_map
 
-    uv = conformal_start(mesh) if free_boundary and not scale_invariant else None
+    uv = free_start(mesh, free_boundary, scale_invariant)
     return convex_map(mesh) if uv is None else uv
 
 
@@ -226,9 +229,10 @@ def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, stric
         # A free boundary's optimum does not depend on the start (its rows' gradient is 0;
         # for an energy that is not scale-invariant, not even through its scale), so the
         # conformal start may be a constant; under jax.jit the vertices have no value.
-        V = _concrete(mesh.vertices) if free_boundary and not en.scale_invariant else None
-        uv = None if V is None else conformal_start(TriMesh(V, mesh.faces, mesh.topology,
-                                                            validate=False))
+        V = _concrete(mesh.vertices)
+        uv = None if V is None else free_start(TriMesh(V, mesh.faces, mesh.topology,
+                                                       validate=False),
+                                               free_boundary, en.scale_invariant)
         init = convex_map(mesh) if uv is None else uv
     init = jnp.asarray(init, jnp.float64)
     if init.shape != (mesh.n_vertices, 2):
