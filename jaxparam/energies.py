@@ -24,8 +24,11 @@ differences need steps well below ``s1 - s2`` (tests/test_gradients.py).
 **Derivatives.** The mesh energy ``energy(mesh, uv)`` of an energy of the Jacobian has a
 hand-written derivative (a ``jax.custom_jvp``, :func:`_mesh_energy`): the closed-form
 ``dE/dJ`` of each form (:meth:`_SingularValueForm.value_and_dJ`), chained through the Jacobian
-and the local frame by hand.  Forward and reverse mode and Hessians all work, and agree with
-JAX's own derivative of the formula to 1e-10 (tests/test_energies.py).  The minimizer's
+and the local frame by hand; for the named symmetric functions of the singular values (all but
+``condition_2`` and ``condition_2_squared``), written in the invariants ``s1^2 + s2^2`` and
+``s1 s2``, through the Gram matrix of the 3D edges instead, a shorter chain
+(:func:`_invariant_face_terms`).  Forward and reverse mode and Hessians all work, and agree
+with JAX's own derivative of the formula to 1e-10 (tests/test_energies.py).  The minimizer's
 kernels (:func:`total`) differentiate the densities with JAX, as before.
 """
 from __future__ import annotations
@@ -203,10 +206,16 @@ class _OfJacobian:
 @dataclass(frozen=True)
 class _SingularValueForm:
     """``of_J(J) = fn(s1, s2)``, ``+inf`` where ``det J <= 0`` when ``barrier``
-    (``|s2|`` otherwise)."""
+    (``|s2|`` otherwise).
+
+    ``invariants``, when given, is the same function of ``(s1^2 + s2^2, s1 s2)`` (``s1 |s2|``
+    without a barrier): ``fn(s1, s2) == invariants(s1**2 + s2**2, s1 * s2)``, which only a
+    symmetric ``fn`` has.  The derivative of the mesh energy then takes the Gram chain
+    (:func:`_invariant_face_terms`)."""
 
     fn: Callable
     barrier: bool
+    invariants: Callable | None = None
 
     def __call__(self, J, *params):
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
@@ -311,8 +320,11 @@ def _face_terms(form, V, F, Q, params):
     ``y2 = |e1 x e2| / l1``), ``J = [q1 - q0, q2 - q0] Pinv`` with
     ``Pinv = [[y2, -x2], [0, l1]] / (l1 y2)`` (survey eq. (9)), the form's ``dE/dJ``; then
     ``dE/d[q1 - q0, q2 - q0] = M = dE/dJ Pinv^T`` and ``dE/dP = -J^T M`` for the frame's
-    ``(l1, x2, y2)``, and the frame's derivatives in ``(e1, e2)``.
+    ``(l1, x2, y2)``, and the frame's derivatives in ``(e1, e2)``.  A form with invariants
+    takes a shorter chain (:func:`_invariant_face_terms`).
     """
+    if getattr(form, "invariants", None) is not None and not params:
+        return _invariant_face_terms(form, V, F, Q)
     P = V[F]
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     g11, g12, g22 = geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)
@@ -337,6 +349,55 @@ def _face_terms(form, V, F, Q, params):
     gq1, gq2 = jnp.stack([M00, M10], -1), jnp.stack([M01, M11], -1)
     gQ = jnp.stack([-(gq1 + gq2), gq1, gq2], 1)
     return 0.5 * nn, f, e1, e2, gQ, (c11, c12, c22, 0.5 * inn, (g11, g12, g22), form_aux)
+
+
+def _invariant_face_terms(form, V, F, Q):
+    """:func:`_face_terms` for a form with ``invariants`` (and no parameters), through the 3D
+    edges' Gram matrix ``g = [e1 e2]^T [e1 e2]`` instead of the local frame; same returns
+    (``form_aux`` is ``None``).
+
+    ``J J^T = U P^-1 P^-T U^T = U g^-1 U^T`` (``U = [q1 - q0, q2 - q0]``, ``P`` the frame's
+    edges, ``P^T P = g``), so ``tr = s1^2 + s2^2 = tr(g^-1 K)`` with ``K = U^T U``, and
+    ``det J = s1 s2 = det U / sqrt(det g)``: the density is a function of ``(tr, det J)``
+    and of the 3D triangle only through ``g``.  The chain has no frame, no Jacobian and no
+    singular values (their square roots and reciprocals), and ``f`` is smooth in
+    ``(tr, det J)`` where ``fn`` kinks in ``s1 - s2``.  ``det g = |e1 x e2|^2`` comes from the
+    cross product, which keeps its accuracy on needle triangles.
+    """
+    P = V[F]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    g11, g12, g22 = geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)
+    cr = jnp.cross(e1, e2)
+    nn, inn = _root(geo.dot(cr, cr))
+    idg = inn * inn
+    u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
+    K11, K12, K22 = geo.dot(u1, u1), geo.dot(u1, u2), geo.dot(u2, u2)
+    tr = (g22 * K11 - 2.0 * g12 * K12 + g11 * K22) * idg
+    det = (u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0]) * inn
+    fn = jax.vmap(jax.value_and_grad(form.invariants, argnums=(0, 1)))
+    if form.barrier:
+        ok = det > 0
+        f, (f_tr, f_det) = fn(tr, jnp.where(ok, det, 1.0))
+        f = jnp.where(ok, f, jnp.inf)
+        f_tr, f_det = jnp.where(ok, f_tr, 0.0), jnp.where(ok, f_det, 0.0)
+    else:
+        f, (f_tr, f_det) = fn(tr, jnp.abs(det))
+        f_det = f_det * jnp.sign(det)
+    # d tr = (dN - tr d(det g)) / det g and d(det J) = -det J d(det g) / (2 det g), with
+    # N = g22 K11 - 2 g12 K12 + g11 K22 and det g = g11 g22 - g12^2; then df/de1 =
+    # 2 df/dg11 e1 + df/dg12 e2 and df/de2 = df/dg12 e1 + 2 df/dg22 e2.
+    b = -(f_tr * tr + 0.5 * f_det * det)
+    c11 = 2.0 * idg * (f_tr * K22 + b * g22)
+    c12 = -2.0 * idg * (f_tr * K12 + b * g12)
+    c22 = 2.0 * idg * (f_tr * K11 + b * g11)
+    # d tr / du1 = 2 (g22 u1 - g12 u2) / det g,  d det U / du1 = (u2y, -u2x); likewise u2.
+    kt, kd = 2.0 * idg * f_tr, f_det * inn
+    gq1 = (kt * g22)[:, None] * u1 - (kt * g12)[:, None] * u2 + kd[:, None] * jnp.stack(
+        [u2[:, 1], -u2[:, 0]], -1)
+    gq2 = (kt * g11)[:, None] * u2 - (kt * g12)[:, None] * u1 + kd[:, None] * jnp.stack(
+        [-u1[:, 1], u1[:, 0]], -1)
+    gQ = jnp.stack([-(gq1 + gq2), gq1, gq2], 1)
+    return 0.5 * nn, f, e1, e2, gQ, (c11, c12, c22, 0.5 * inn, (g11, g12, g22), None)
 
 
 def _is_zero(t) -> bool:
@@ -371,18 +432,22 @@ def _mesh_energy(en: Energy, V, F, Q):
         A = jnp.sum(a)
         E = jnp.sum(a * f) / A
         t = jnp.zeros((), E.dtype)
-        wa, wf = a / A, (f - E) * h / A            # per face: of df/dP and of da/dP
+        iA = 1.0 / A
+        wa, wf = a * iA, (f - E) * h * iA          # per face: of df/dP and of da/dP
         if not _is_zero(dV):
             w11 = wa * c11 + wf * g22
             w12 = wa * c12 - wf * g12
             w22 = wa * c22 + wf * g11
             W1 = w11[:, None] * e1 + w12[:, None] * e2
             W2 = w12[:, None] * e1 + w22[:, None] * e2
-            # Gathered by corner: the transpose is 3 scatters of (m, 3) rows, with no stacked
-            # (m, 3, 3) cotangent for XLA to build and slice (session 12: 5-8 % off the
-            # gradient on camelhead against 3 scalar scatters by coordinate, which were
-            # themselves 5.3 -> 4.4 ms against one scatter of (3m, 3) rows).
-            t = t + sum(jnp.sum(Wc * dV[F[:, c]]) for c, Wc in enumerate((-(W1 + W2), W1, W2)))
+            # dE/dV summed here, in the primal, by one chain of scatters into one buffer; the
+            # tangent is <dE/dV, dV>, whose transpose is dE/dV itself.  The transpose of a
+            # gather per corner made three scatters into three zeroed buffers and added them
+            # (session 15: 1.11 -> 1.01 ms for symmetric Dirichlet's gradient on camelhead).
+            gV = jnp.zeros_like(V)
+            for c, Wc in enumerate((-(W1 + W2), W1, W2)):
+                gV = gV.at[F[:, c]].add(Wc)
+            t = t + jnp.sum(gV * dV)
         if not _is_zero(dQ):
             t = t + jnp.sum(wa[:, None, None] * gQ * dQ)
         if params and not _is_zero(dp):
@@ -401,10 +466,11 @@ def _mesh_energy(en: Energy, V, F, Q):
 
 
 def _from_sv(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
-             params=None) -> Energy:
+             params=None, invariants=None) -> Energy:
     """An Energy from a function of the singular values (s1 >= s2 > 0 when unflipped);
-    ``fn(s1, s2, params)`` when ``parametric``."""
-    of_J = _SingularValueForm(fn, barrier)
+    ``fn(s1, s2, params)`` when ``parametric``; ``invariants(s1^2 + s2^2, s1 s2)`` the same
+    function, when it is symmetric (:class:`_SingularValueForm`)."""
+    of_J = _SingularValueForm(fn, barrier, invariants)
     return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
                   of_sv=fn if barrier else None, parametric=parametric, params=params)
 
@@ -444,24 +510,31 @@ def mips_prop2(frame, q):
 ENERGIES: dict[str, Energy] = {
     # Corollary 1 (survey §6): condition numbers, all proper deformation functionals.
     "condition_2": _from_sv("condition_2", lambda s1, s2: s1 / s2, True),
-    "mips": _from_sv("mips", lambda s1, s2: s1 / s2 + s2 / s1, True),
+    "mips": _from_sv("mips", lambda s1, s2: s1 / s2 + s2 / s1, True,
+                     invariants=lambda tr, d: tr / d),
     "condition_2_squared": _from_sv("condition_2_squared", lambda s1, s2: (s1 / s2) ** 2, True),
     "condition_f_squared": _from_sv("condition_f_squared",
-                                    lambda s1, s2: (s1 / s2) ** 2 + (s2 / s1) ** 2, True),
+                                    lambda s1, s2: (s1 / s2) ** 2 + (s2 / s1) ** 2, True,
+                                    invariants=lambda tr, d: (tr / d) ** 2 - 2.0),
     "angle": Energy("angle", _angle_density, True),
     # Maillot et al.: the Green–Lagrange tensor ||J^T J - I||_F^2 (not a deformation functional).
     "green_lagrange": _from_J("green_lagrange", lambda J: jnp.sum((J.T @ J - jnp.eye(2)) ** 2),
                               barrier=False),
     "symmetric_dirichlet": _from_sv("symmetric_dirichlet",
-                                    lambda s1, s2: s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2),
-    "arap": _from_sv("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, barrier=False),
-    "conformal": _from_sv("conformal", lambda s1, s2: 0.5 * (s1 - s2) ** 2, True, barrier=False),
+                                    lambda s1, s2: s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2,
+                                    invariants=lambda tr, d: tr + tr / (d * d)),
+    # Without a barrier the forms see |s2|, so d = s1 |s2| and s1 + |s2| = sqrt(tr + 2 d).
+    "arap": _from_sv("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, barrier=False,
+                     invariants=lambda tr, d: tr - 2.0 * geo.safe_sqrt(tr + 2.0 * d) + 2.0),
+    "conformal": _from_sv("conformal", lambda s1, s2: 0.5 * (s1 - s2) ** 2, True, barrier=False,
+                          invariants=lambda tr, d: 0.5 * tr - d),
     "dirichlet": _from_J("dirichlet", lambda J: 0.5 * jnp.sum(J ** 2), barrier=False),
     # Sander et al. 2001 (survey ref. [27]): the L2 stretch of the inverse map UV -> surface,
     # whose singular values are 1/s2 >= 1/s1: (Gamma^2 + gamma^2) / 2; its area-weighted mean
     # is L2(M)^2.  Penalizes UV triangles small for their 3D area (the squeeze that starves
     # a remesh of samples); not scale invariant, so minimize it with a fixed boundary.
-    "stretch": _from_sv("stretch", lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2)),
+    "stretch": _from_sv("stretch", lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2),
+                        invariants=lambda tr, d: 0.5 * tr / (d * d)),
 }
 
 

@@ -203,6 +203,29 @@ def test_closed_form_dE_dJ_matches_autodiff_on_degenerate_jacobians(name):
         assert all(np.all(np.asarray(gi)[flipped] == 0) for gi in g)
 
 
+@pytest.mark.parametrize("name", [n for n, e in E.ENERGIES.items()
+                                  if isinstance(e.of_J, E._SingularValueForm)])
+def test_invariant_forms_equal_the_singular_value_forms(name):
+    """A named energy's ``invariants(s1^2 + s2^2, s1 s2)`` (which its mesh derivative uses,
+    energies._invariant_face_terms) is its ``fn(s1, s2)``, on both orders of the singular
+    values and, without a barrier, on flipped faces (``|s2|``); the asymmetric ones have none."""
+    form = E.ENERGIES[name].of_J
+    s1, s2 = np.random.default_rng(8).uniform(0.2, 3.0, (2, 60))
+    if form.invariants is None:
+        assert not np.allclose(form.fn(s1, s2), form.fn(s2, s1), rtol=1e-12)
+        return
+    for a, b in ((s1, s2), (s2, s1)):
+        want = form.fn(a, b)
+        np.testing.assert_allclose(form.invariants(a * a + b * b, a * b), want, rtol=1e-12,
+                                   atol=1e-14)
+    if not form.barrier:        # a flipped face: fn sees |s2|, the invariants s1 |s2|
+        np.testing.assert_allclose(form(jnp.asarray([[1.3, 0.2], [0.1, -0.6]])),
+                                   form.fn(*np.abs(np.linalg.svd([[1.3, 0.2], [0.1, -0.6]],
+                                                                  compute_uv=False))),
+                                   rtol=1e-13)
+    assert E.energy(lambda s1, s2: s1 ** 2 + s2 ** 2).of_J.invariants is None   # users: frame
+
+
 def _mesh(planar=False):
     mesh = jp.shapes.disk(2, seed=1, height=0.0 if planar else 0.3)
     rng = np.random.default_rng(3)
