@@ -29,6 +29,12 @@
     map's gradient on 126k fan entries: 40 % faster; :mod:`jaxparam.memory`).  Applied when JAX
     loads and whenever it is set; elsewhere than glibc it does nothing.
 
+``jp.config.threads``
+    How many threads the NumPy stages of the points stack use for their blocks of rows (tangent
+    frames, fans, gaps; :mod:`jaxparam.blocks`).  Default: the cores this process may run on;
+    ``JAXPARAM_THREADS`` sets the default.  ``1`` runs every block in the calling thread.  The
+    results are bitwise the same for any value.
+
 ``import jaxparam`` does not import JAX (issue 17): :func:`configure_jax` (float64 and the
 compilation cache) runs the moment JAX loads, whoever imports it, through
 :func:`jaxparam.lazy_jax.when_jax_loads`.
@@ -46,7 +52,7 @@ from pathlib import Path
 from .lazy_jax import jax_loaded
 
 __all__ = ["Settings", "config", "env_flag", "default_compile_cache", "default_keep_freed_mb",
-           "configure_jax"]
+           "default_threads", "configure_jax"]
 
 _FALSE = {"0", "false", "no", "off", ""}
 
@@ -67,13 +73,14 @@ class Settings:
     ``AttributeError`` naming the known ones, so a typo is not silently ignored.
     """
 
-    __slots__ = ("_progress", "_compile_cache", "_buckets", "_keep_freed_mb")
+    __slots__ = ("_progress", "_compile_cache", "_buckets", "_keep_freed_mb", "_threads")
 
     def __init__(self) -> None:
         self._progress: bool | None = None
         self._buckets: bool | None = None
         self._compile_cache: str | None = default_compile_cache()
         self._keep_freed_mb: int = default_keep_freed_mb()
+        self._threads: int | None = None
 
     @property
     def progress(self) -> bool:
@@ -125,6 +132,24 @@ class Settings:
                 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
         except (AttributeError, KeyError):  # an old JAX without these options: run uncached
             pass
+
+    @property
+    def threads(self) -> int:
+        """Threads for the points stack's row blocks (``JAXPARAM_THREADS`` sets the default:
+        else the cores this process may run on)."""
+        if self._threads is not None:
+            return self._threads
+        return default_threads()
+
+    @threads.setter
+    def threads(self, value: int | None) -> None:
+        if value is None:
+            self._threads = None
+            return
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"jp.config.threads must be a whole number >= 1 (or None for the "
+                             f"default), got {value!r}.")
+        self._threads = value
 
     @property
     def keep_freed_mb(self) -> int:
@@ -196,6 +221,25 @@ def default_keep_freed_mb() -> int:
     except ValueError as exc:
         warnings.warn(f"{exc} (0 leaves glibc's own limits); using 512.", stacklevel=2)
     return 512
+
+
+def default_threads() -> int:
+    """``$JAXPARAM_THREADS`` (a whole number >= 1), else the cores this process may run on
+    (its CPU affinity, so ``taskset`` is honoured); a bad value is ignored with a warning."""
+    value = os.environ.get("JAXPARAM_THREADS")
+    if value is not None and value.strip():
+        try:
+            n = int(value.strip())
+            if n >= 1:
+                return n
+        except ValueError:
+            pass
+        warnings.warn(f"JAXPARAM_THREADS={value!r} is not a whole number >= 1; using the cores.",
+                      stacklevel=2)
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):          # not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 #: The one settings object of the library, exported as ``jp.config``.

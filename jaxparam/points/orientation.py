@@ -11,7 +11,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
+from ..blocks import for_blocks
+
 __all__ = ["orient_normals"]
+
+#: Pairs per block of the tree's weights (:func:`jaxparam.blocks.for_blocks`).
+PAIR_BLOCK = 1 << 16
 
 
 def orient_normals(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray, normal: np.ndarray,
@@ -47,14 +52,19 @@ def orient_normals(P: np.ndarray, indptr: np.ndarray, indices: np.ndarray, norma
         # Each pair once, as (smaller, larger) (the weight is symmetric; a directed pair counts
         # as undirected); a pair listed both ways is averaged below.
         rows, cols = np.where(up, rows, cols), np.where(up, cols, rows)
-    d = P[cols] - P[rows]
-    n_r, n_c = normal[rows], normal[cols]
-    ln = np.sqrt(np.einsum("ij,ij->i", d, d)) + 1e-300
-    slope = np.maximum(np.abs(np.einsum("ij,ij->i", d, n_r)), np.abs(np.einsum("ij,ij->i", d, n_c))) / ln
-    dot = np.einsum("ij,ij->i", n_r, n_c)
-    del n_r, n_c
-    # Strictly positive: a zero weight would be read as no edge.
-    w = 1.0 - np.abs(dot) + slope + 1e-9
+    w = np.empty(rows.size)
+
+    def block(lo, hi):
+        r, c = rows[lo:hi], cols[lo:hi]
+        d = P[c] - P[r]
+        n_r, n_c = normal[r], normal[c]
+        ln = np.sqrt(np.einsum("ij,ij->i", d, d)) + 1e-300
+        slope = np.maximum(np.abs(np.einsum("ij,ij->i", d, n_r)),
+                           np.abs(np.einsum("ij,ij->i", d, n_c))) / ln
+        # Strictly positive: a zero weight would be read as no edge.
+        w[lo:hi] = 1.0 - np.abs(np.einsum("ij,ij->i", n_r, n_c)) + slope + 1e-9
+
+    for_blocks(block, rows.size, PAIR_BLOCK)        # pairs in blocks: each weight on its own
     if symmetric:
         ptr = np.zeros(N + 1, np.int64)
         np.cumsum(np.bincount(rows, minlength=N), out=ptr[1:])

@@ -6,8 +6,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..blocks import for_blocks
 from .defaults import GAP, OUTLIER_HEIGHT, OUTLIER_ISOLATION, OUTLIER_SCALE
-from .graph import Frames
+from .graph import DENSE_BLOCK, Frames
 
 __all__ = ["find_outliers", "drop_points"]
 
@@ -56,7 +57,13 @@ def _row_median(v: np.ndarray) -> np.ndarray:
     middle one or two (np.median's own checks and copies cost as much again at 1M points)."""
     k = v.shape[1]
     mid = [(k - 1) // 2, k // 2]
-    return np.partition(v, mid, axis=1)[:, mid].mean(1)
+    out = np.empty(v.shape[0])
+
+    def block(r0, r1):
+        out[r0:r1] = np.partition(v[r0:r1], mid, axis=1)[:, mid].mean(1)
+
+    for_blocks(block, v.shape[0], DENSE_BLOCK)
+    return out
 
 
 def drop_points(P: np.ndarray, dist: np.ndarray, near: np.ndarray, drop: np.ndarray, k: int):
