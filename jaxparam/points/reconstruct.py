@@ -157,7 +157,7 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
         protect = np.zeros(len(P0), bool)            # the user's boundary points stay
         if user is not None:
             protect[user] = True
-        # Two rounds: outliers close to each other hide each other in the first.
+        # Up to OUTLIER_ROUNDS rounds: outliers close to each other hide each other in the first.
         for _ in range(OUTLIER_ROUNDS if outliers else 0):
             bad = find_outliers(P, frames, dist[:, :K_FRAME], near[:, :K_FRAME]) & ~protect[order]
             if not bad.any():
