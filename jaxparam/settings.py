@@ -146,10 +146,14 @@ class Settings:
         if value is None:
             self._threads = None
             return
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        try:
+            n = operator.index(value)           # ints, NumPy integers; not floats or strings
+        except TypeError:
+            n = 0
+        if isinstance(value, bool) or n < 1:
             raise ValueError(f"jp.config.threads must be a whole number >= 1 (or None for the "
                              f"default), got {value!r}.")
-        self._threads = value
+        self._threads = int(n)
 
     @property
     def keep_freed_mb(self) -> int:

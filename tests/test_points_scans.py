@@ -308,8 +308,14 @@ def test_row_blocks_on_threads_give_the_same_bits():
     np.testing.assert_array_equal(runs[0][0], runs[1][0])
     np.testing.assert_array_equal(runs[0][1], runs[1][1])
     np.testing.assert_array_equal(runs[0][2], runs[1][2])
-    with pytest.raises(ValueError, match="threads"):
-        jp.config.threads = 0
+    for bad in (0, 1.5, "2", True):
+        with pytest.raises(ValueError, match="threads must be a whole number"):
+            jp.config.threads = bad
+    try:
+        jp.config.threads = np.int64(2)
+        assert jp.config.threads == 2
+    finally:
+        jp.config.threads = None
 
 
 def test_boundary_chain_is_not_lengthened_by_stray_points_off_the_surface():
