@@ -240,8 +240,13 @@ def _uv_cases():
     m, p = _mesh(), _mesh(planar=True)
     sim = np.asarray(p.vertices)[:, :2] @ np.array([[1.3, -0.4], [0.4, 1.3]])
     noise = 1e-5 * np.random.default_rng(4).standard_normal(sim.shape)
-    return {"convex": (m, np.asarray(jp.convex_map(m))), "conformal": (p, sim),
-            "near_conformal": (p, sim + noise)}
+    convex = np.asarray(jp.convex_map(m))
+    # Flipped: the UVs mirrored across a line through the centre on one side of it, so that
+    # the faces it crosses fold over (for the energies without a barrier, which see |s2|).
+    c = convex - convex.mean(0)
+    folded = np.where(c[:, :1] > 0.1, c * [-0.5, 1.0], c)
+    return {"convex": (m, convex), "conformal": (p, sim), "near_conformal": (p, sim + noise),
+            "flipped": (m, folded)}
 
 
 USER = {
@@ -264,7 +269,9 @@ MESH_FAST = [("mips", "convex"), ("symmetric_dirichlet", "conformal"),
     for n in ["mips", "symmetric_dirichlet", "conformal", "arap", "condition_2",
               "condition_2_squared", "green_lagrange", "dirichlet", "stretch", "sv_params",
               "J_params"]
-    for c in ["convex", "conformal", "near_conformal"] if not (n in KINKED and c == "conformal")])
+    for c in ["convex", "conformal", "near_conformal"] if not (n in KINKED and c == "conformal")]
+    + [("arap", "flipped")] + [pytest.param(n, "flipped", marks=pytest.mark.slow)
+                               for n in ("conformal", "green_lagrange", "dirichlet")])
 def test_mesh_energy_jvp_and_vjp_match_autodiff_of_old_formula(name, case):
     mesh, uv = _uv_cases()[case]
     F, V, uv = mesh.faces, jnp.asarray(mesh.vertices), jnp.asarray(uv)
