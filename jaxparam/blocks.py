@@ -11,7 +11,7 @@ threads (tests/test_points_scans.py checks it).  Measured at 1M points on the 2-
 from __future__ import annotations
 
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from typing import Callable
 
 from .settings import config
@@ -47,5 +47,6 @@ def for_blocks(body: Callable[[int, int], None], n: int, block: int) -> None:
             body(r0, min(r0 + block, n))
         return
     futures = [_executor(threads).submit(body, r0, min(r0 + block, n)) for r0 in starts]
+    wait(futures)                          # every block done before any error is raised
     for f in futures:
         f.result()

@@ -348,3 +348,21 @@ def test_boundary_chain_is_not_lengthened_by_stray_points_off_the_surface():
                        detect_k=K_DETECT, detect_gap=gap, detect_spacing=spacing)
     loop = PT.detect_boundary(P, graph)
     assert set(loop.tolist()) == set(range(50))
+
+
+def test_an_error_in_a_row_block_reaches_the_caller_after_every_block_ran():
+    from jaxparam.blocks import for_blocks
+    done = np.zeros(10, bool)
+
+    def body(r0, r1):
+        done[r0:r1] = True
+        if r0 == 0:
+            raise ValueError("block 0 failed")
+
+    try:
+        jp.config.threads = 2
+        with pytest.raises(ValueError, match="block 0 failed"):
+            for_blocks(body, 10, 2)
+    finally:
+        jp.config.threads = None
+    assert done.all()
