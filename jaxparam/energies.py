@@ -360,9 +360,9 @@ def _invariant_face_terms(form, V, F, Q):
     edges, ``P^T P = g``), so ``tr = s1^2 + s2^2 = tr(g^-1 K)`` with ``K = U^T U``, and
     ``det J = s1 s2 = det U / sqrt(det g)``: the density is a function of ``(tr, det J)``
     and of the 3D triangle only through ``g``.  The chain has no frame, no Jacobian and no
-    singular values (their square roots and reciprocals), and ``f`` is smooth in
-    ``(tr, det J)`` where ``fn`` kinks in ``s1 - s2``.  ``det g = |e1 x e2|^2`` comes from the
-    cross product, which keeps its accuracy on needle triangles.
+    singular values (their square roots and reciprocals), and no ``0 / 0`` at a conformal
+    face, where the frame's chain divides ``df/ds1 - df/ds2`` by ``s1 - s2``.  ``det g =
+    |e1 x e2|^2`` comes from the cross product, which keeps its accuracy on needle triangles.
     """
     P = V[F]
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
