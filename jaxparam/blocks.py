@@ -10,6 +10,7 @@ threads (tests/test_points_scans.py checks it).  Measured at 1M points on the 2-
 """
 from __future__ import annotations
 
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor, wait
 from typing import Callable
@@ -19,18 +20,21 @@ from .settings import config
 __all__ = ["for_blocks"]
 
 _pool: ThreadPoolExecutor | None = None
-_pool_size = 0
+_pool_key = (0, 0)                      # (threads, process id) the pool was made for
 _pool_lock = threading.Lock()
 
 
 def _executor(threads: int) -> ThreadPoolExecutor:
-    """The shared pool of ``threads`` workers (made again when the setting changes)."""
-    global _pool, _pool_size
+    """The shared pool of ``threads`` workers, made again when the setting changes and in a
+    forked child (which inherits the pool object but none of its threads: work sent to it
+    would wait for ever)."""
+    global _pool, _pool_key
+    key = (threads, os.getpid())
     with _pool_lock:
-        if _pool is None or _pool_size != threads:
-            if _pool is not None:
+        if _pool is None or _pool_key != key:
+            if _pool is not None and _pool_key[1] == key[1]:
                 _pool.shutdown(wait=False)
-            _pool, _pool_size = ThreadPoolExecutor(threads, thread_name_prefix="jaxparam-rows"), threads
+            _pool, _pool_key = ThreadPoolExecutor(threads, thread_name_prefix="jaxparam-rows"), key
         return _pool
 
 

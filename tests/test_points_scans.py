@@ -366,3 +366,43 @@ def test_an_error_in_a_row_block_reaches_the_caller_after_every_block_ran():
     finally:
         jp.config.threads = None
     assert done.all()
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no fork on this platform")
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")   # JAX's, when it is loaded
+def test_row_blocks_work_in_a_forked_child():
+    """A child forked after the row-block pool has started inherits the pool but not its
+    threads; it must make its own instead of waiting for ever."""
+    import multiprocessing as mp
+    from jaxparam.blocks import for_blocks
+    out = np.zeros(8)
+
+    def body(r0, r1):
+        out[r0:r1] = 1.0
+
+    try:
+        jp.config.threads = 2
+        for_blocks(body, 8, 2)                     # the parent's pool exists now
+        ctx = mp.get_context("fork")
+        child = ctx.Process(target=_fill_in_child)
+        child.start()
+        child.join(60)
+        alive = child.is_alive()
+        if alive:
+            child.kill()
+        assert not alive and child.exitcode == 0
+    finally:
+        jp.config.threads = None
+    assert out.all()
+
+
+def _fill_in_child():
+    from jaxparam.blocks import for_blocks
+    jp.config.threads = 2
+    got = np.zeros(8)
+
+    def body(r0, r1):
+        got[r0:r1] = 1.0
+
+    for_blocks(body, 8, 2)
+    raise SystemExit(0 if got.all() else 1)
