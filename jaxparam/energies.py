@@ -323,14 +323,10 @@ def _face_terms(form, V, F, Q, params):
     ``(l1, x2, y2)``, and the frame's derivatives in ``(e1, e2)``.  A form with invariants
     takes a shorter chain (:func:`_invariant_face_terms`).
     """
-    if getattr(form, "invariants", None) is not None and not params:
+    if isinstance(form, _SingularValueForm) and form.invariants is not None and not params:
         return _invariant_face_terms(form, V, F, Q)
-    P = V[F]
-    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    g11, g12, g22 = geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)
+    e1, e2, (g11, g12, g22), (nn, inn) = _edge_gram(V, F)
     l1, il1 = _root(g11)
-    cr = jnp.cross(e1, e2)
-    nn, inn = _root(geo.dot(cr, cr))
     x2, y2 = g12 * il1, nn * il1
     u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
     idet = 1.0 / (l1 * y2)
@@ -351,6 +347,17 @@ def _face_terms(form, V, F, Q, params):
     return 0.5 * nn, f, e1, e2, gQ, (c11, c12, c22, 0.5 * inn, (g11, g12, g22), form_aux)
 
 
+def _edge_gram(V, F):
+    """Each face's edges ``e1 = p1 - p0``, ``e2 = p2 - p0`` (``(m, 3)`` each), their Gram
+    matrix ``(g11, g12, g22)`` and ``(|e1 x e2|, 1 / |e1 x e2|)`` (twice the area and its
+    inverse, both 0 on a degenerate face), ``(m,)`` each."""
+    P = V[F]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    cr = jnp.cross(e1, e2)
+    return (e1, e2, (geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)),
+            _root(geo.dot(cr, cr)))
+
+
 def _invariant_face_terms(form, V, F, Q):
     """:func:`_face_terms` for a form with ``invariants`` (and no parameters), through the 3D
     edges' Gram matrix ``g = [e1 e2]^T [e1 e2]`` instead of the local frame; same returns
@@ -364,11 +371,7 @@ def _invariant_face_terms(form, V, F, Q):
     face, where the frame's chain divides ``df/ds1 - df/ds2`` by ``s1 - s2``.  ``det g =
     |e1 x e2|^2`` comes from the cross product, which keeps its accuracy on needle triangles.
     """
-    P = V[F]
-    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    g11, g12, g22 = geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)
-    cr = jnp.cross(e1, e2)
-    nn, inn = _root(geo.dot(cr, cr))
+    e1, e2, (g11, g12, g22), (nn, inn) = _edge_gram(V, F)
     idg = inn * inn
     u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
     K11, K12, K22 = geo.dot(u1, u1), geo.dot(u1, u2), geo.dot(u2, u2)

@@ -131,8 +131,8 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
       no boundary self-crossing), which lets the boundary start near where it ends (Newton,
       symmetric Dirichlet, against the convex map: camelhead 25 -> 19 steps, snail x16 12 -> 5;
       under ``jax.jit`` and ``jax.vmap``, where the vertices have no value yet, the convex
-      map).  With
-      ``free_boundary`` and a scale-dependent energy the start is rescaled to the 3D area.
+      map).  With ``free_boundary`` and a scale-dependent energy the start is rescaled to
+      the 3D area.
     - ``free_boundary``: let the boundary move (False: the start's boundary stays).
     - ``solver``: a name of :data:`jaxparam.optimize.SOLVERS` (``"newton"``, ``"lbfgs"``,
       ``"bfgs"``, ``"jaxopt_lbfgs"``; hyphens allowed), or a solver instance with its own
