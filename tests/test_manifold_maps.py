@@ -232,8 +232,8 @@ def test_every_closed_mesh_of_shared_data_at_every_base_count(name, nb):
 
 @pytest.mark.slow
 @pytest.mark.data
-@pytest.mark.parametrize("name, bound", [("bunny.off", 0.0065), ("3holes.off", 0.004), ("rocker-arm.obj", 0.0065),
-                                         ("cow.off", 0.0085), ("decimated-knight.off", 0.0085)])
+@pytest.mark.parametrize("name, bound", [("bunny.off", 0.0045), ("3holes.off", 0.004), ("rocker-arm.obj", 0.0065),
+                                         ("cow.off", 0.0068), ("decimated-knight.off", 0.0085)])
 def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_faces(name, bound):
     """Measured 0.72 %, 0.27 %, 0.63 %, 0.85 %, 0.94 % (Hausdorff both ways, bounding-box
     diagonal) with the samples relaxed across base edges, and at the finest level too where
@@ -242,7 +242,8 @@ def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_face
     were relaxed step by step, which keeps the tips of thin parts in the base domain).  The
     issue's goal is 0.5 % on every mesh; this is a regression guard.  With the base domain
     chosen among three area caps (session 10; 50,000 samples): 0.48 %, 0.26 %, 0.48 %, 0.69 %,
-    0.71 %."""
+    0.71 %; with the tips snapped (manifold/snap.py, session 16): 0.34 %, 0.26 %, 0.48 %,
+    0.57 %, 0.71 %."""
     mesh = jp.load(data_path("meshes", name))
     base, param = manifold_map(mesh, 100)
     rep = param.report(4, samples=20_000)
@@ -481,3 +482,62 @@ def test_decimations_do_not_depend_on_where_the_mesh_is():
     kept, F0 = decimate(jp.TriMesh(V, F), 40)
     kept_far, F0_far = decimate(jp.TriMesh(V + 1e6, F), 40)
     assert np.array_equal(kept, kept_far) and np.array_equal(F0, F0_far)
+
+
+def _bumpy_sphere(seed: int = 0):
+    """A sphere (1,280 faces) with 30 vertices pushed out by 12 %: tips narrower than a
+    level-3 remesh over 20 base faces, which its dyadic samples miss."""
+    m = jp.shapes.sphere(3)
+    V = np.asarray(m.vertices).copy()
+    tips = np.random.default_rng(seed).choice(V.shape[0], 30, replace=False)
+    V[tips] *= 1.12
+    return jp.TriMesh(V, np.asarray(m.faces)), tips
+
+
+def test_tips_cut_off_by_the_remesh_get_a_sample_and_nothing_turns_over(monkeypatch):
+    # manifold/snap.py: the samples nearest to the tips that the remesh cuts off move onto
+    # them, exactly; the connectivity and the base vertices stay, no remesh face turns over
+    # in its chart, and the tips come closer (the same parameterization, snapping off/on).
+    import jaxparam.manifold.parameterization as pz
+    from jaxparam.manifold.relax import BaseDomain, signed_chart_areas
+    from jaxparam.subdivision import dyadic_hierarchy
+
+    mesh, tips = _bumpy_sphere()
+    V = np.asarray(mesh.vertices)
+    _, param = manifold_map(mesh, 20, verbose=False)
+    on = param.remesh(3)
+    monkeypatch.setattr(pz, "SNAP_ROUNDS", 0)
+    off = param.remesh(3)
+    np.testing.assert_array_equal(on.mesh.faces, off.mesh.faces)
+    n0 = param.base_vertices.size
+    Xon, Xoff = np.asarray(on.mesh.vertices), np.asarray(off.mesh.vertices)
+    np.testing.assert_array_equal(Xon[:n0], Xoff[:n0])
+
+    def hits(X):
+        return sum(bool(np.min(np.linalg.norm(X - V[t], axis=1)) == 0.0) for t in tips)
+
+    assert hits(Xon) >= hits(Xoff) + 5, (hits(Xon), hits(Xoff))
+    a, b = fidelity(param, off, mesh, samples=5000), fidelity(param, on, mesh, samples=5000)
+    assert b.hausdorff_in < a.hausdorff_in, (a, b)
+    # Every remesh face keeps its orientation in the base domain.
+    monkeypatch.undo()
+    F0 = np.asarray(param.base_faces)
+    H = dyadic_hierarchy(F0, int(F0.max()) + 1, 3)
+    _, r, b, _ = param._samples(3, None)
+    D = BaseDomain(V[param.base_vertices], F0)
+    assert np.all(signed_chart_areas(D, H.faces[-1], r, b) > 0)
+
+
+def test_snapping_moves_nothing_when_no_tip_is_off_the_remesh():
+    # A remesh that is the input itself has no tip off it: snap_tips moves no sample.
+    from jaxparam.manifold.relax import BaseDomain
+    from jaxparam.manifold.snap import snap_tips
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    F = np.array([[0, 1, 2]])
+    D = BaseDomain(V, F)
+    r = np.zeros(3, np.int64)
+    b = np.eye(3)
+    out = snap_tips(D, F, r, b, V, V, F, np.arange(3), r, b)
+    assert np.all(out[3] == -1)
+    np.testing.assert_array_equal(out[2], V)

@@ -25,6 +25,7 @@ from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, es
                     relax_samples, sharpest_vertices)
 from .paths import apply_steps, refine_all, room_for_paths, trace_paths
 from .report import check_closed_manifold, fidelity
+from .snap import SNAP_ROUNDS, snap_tips
 
 __all__ = ["ManifoldParameterization", "ManifoldStructure", "manifold_map"]
 
@@ -153,7 +154,8 @@ def _flattest(X, faces) -> float:
     return 2.0 * float(face_areas(X, faces).min())
 
 
-def _relaxed_samples(S: ManifoldStructure, base_vertices, Fm, F0, H, levels: int, guarded: bool):
+def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H, levels: int,
+                     guarded: bool):
     """The remesh's samples ``(r (n,), b (n, 3), pulled)`` (base face, barycentric
     coordinates, and their pull-back ``(face, bary)`` onto the input or ``None``) with the
     relaxation (see :meth:`ManifoldParameterization.remesh`).
@@ -168,7 +170,10 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, Fm, F0, H, levels: int
     the plain samples when both are dropped), then keep the one closest to the input by :func:`~jaxparam.manifold.relax.estimated_distance`
     (relaxing further is not closer everywhere: at level 4 over 100 base faces the finest
     sweeps took cow 0.99 -> 0.85 % and decimated-knight 1.09 -> 0.94 % of the diagonal, but
-    bunny 0.72 -> 0.77 % and rocker-arm 0.63 -> 0.73 %); otherwise the most relaxed one."""
+    bunny 0.72 -> 0.77 % and rocker-arm 0.63 -> 0.73 %); otherwise the most relaxed one.
+    Then the input's tips that the kept samples cut off are snapped to
+    (:func:`~jaxparam.manifold.snap.snap_tips`; ``vertex_face (N,)`` and ``S.vertex_bary``
+    place them in the base domain), when the estimate finds the snapped remesh closer."""
     P = S.positions
 
     def lift(region, bary):
@@ -192,13 +197,37 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, Fm, F0, H, levels: int
     Xs = [sweep_lift(*plain)] + [np.einsum("kc,kcd->kd", bb, P[Fm[f]]) for f, bb in pulled]
     # Xs[0]: the plain samples, grid points, which the grid lifts exactly.
     kept = [i for i in range(1, len(Xs)) if not _stretches(Xs[i], Xs[0], H.faces[-1])]
-    if not kept:
-        return (*plain, None)
-    best = kept[0]
-    if len(kept) > 1:
-        sharp = sharpest_vertices(P, Fm)
-        best = kept[int(np.argmin([estimated_distance(P, Fm, sharp, Xs[i], H.faces[-1]) for i in kept]))]
-    return (*cands[best - 1], pulled[best - 1])
+    sharp = sharpest_vertices(P, Fm)
+    if kept:
+        errors = [estimated_distance(P, Fm, sharp, Xs[i], H.faces[-1]) for i in kept]
+        best = kept[int(np.argmin(errors))]
+        (r, b), pull, error = cands[best - 1], pulled[best - 1], min(errors)
+    else:
+        best, (r, b), pull = 0, plain, None
+        error = estimated_distance(P, Fm, sharp, Xs[0], H.faces[-1]) if SNAP_ROUNDS else 0.0
+    if not SNAP_ROUNDS:
+        return r, b, pull
+    # The input's tips that the chosen remesh cuts off get a sample each (manifold/snap.py),
+    # kept when the estimate finds the snapped remesh closer to the input.
+    rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, Xs[best], P, Fm, sharp, vertex_face,
+                                   S.vertex_bary)
+    moved = np.flatnonzero(source >= 0)
+    if (not moved.size or _stretches(Xt, Xs[0], H.faces[-1])
+            or not estimated_distance(P, Fm, sharp, Xt, H.faces[-1]) < error):
+        return r, b, pull
+    face, bary = pull if pull is not None else S.history.pull_back(r, b, verbose=False)
+    face, bary = face.copy(), bary.copy()
+    face[moved], bary[moved] = _vertex_corners(Fm, source[moved], P.shape[0])
+    return rs, bs, (face, bary)
+
+
+def _vertex_corners(F: np.ndarray, v: np.ndarray, n: int):
+    """A face of ``F (m, 3)`` at each vertex ``v (k,)`` and the one-hot barycentric
+    coordinates ``(k, 3)`` of the vertex there: ``((k,), (k, 3))``."""
+    face_at = np.empty(n, np.int64)
+    face_at[F.ravel()] = np.arange(F.size) // 3
+    f = face_at[v]
+    return f, (F[f] == v[:, None]).astype(np.float64)
 
 
 @jax.tree_util.register_pytree_node_class
@@ -332,7 +361,8 @@ class ManifoldParameterization:
             if S is None or S.history is None or S.positions is None:
                 raise MeshError("manifold remesh: relax=True needs a parameterization made by "
                                 "jp.manifold_map(mesh, method='maps'); pass relax=False.")
-            r, b, pulled = _relaxed_samples(S, self.base_vertices, np.asarray(self.mesh.faces), F0,
+            r, b, pulled = _relaxed_samples(S, self.base_vertices, self.vertex_face,
+                                            np.asarray(self.mesh.faces), F0,
                                             H, levels, guarded)
         else:
             (r, b), pulled = _dyadic_samples(F0, H, levels), None

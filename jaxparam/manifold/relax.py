@@ -38,7 +38,7 @@ from ..distance import point_triangle_distance
 from .overlay import base_charts, unfolding
 
 __all__ = ["BaseDomain", "GridLift", "relax_samples", "ITERATIONS", "STEP", "CURVATURE_WEIGHT", "FINEST_ITERATIONS",
-           "GRID_MAX_POINTS", "sharpest_vertices", "estimated_distance", "ESTIMATE_POINTS"]
+           "GRID_MAX_POINTS", "sharpest_vertices", "estimated_distance", "ESTIMATE_POINTS", "signed_chart_areas"]
 
 #: Relaxation sweeps, the share of the move taken per sweep, and ``c`` in the weights.
 ITERATIONS = 8
@@ -192,7 +192,7 @@ class GridLift:
         return np.where(f0 + f1 > 1, up, low)
 
 
-def _signed_areas(D: BaseDomain, faces: np.ndarray, r: np.ndarray, b: np.ndarray):
+def signed_chart_areas(D: BaseDomain, faces: np.ndarray, r: np.ndarray, b: np.ndarray):
     """Each face's signed area in its first corner's chart (``nan`` when a corner's base
     triangle shares no vertex with the first's)."""
     a = faces[:, 0]
@@ -265,7 +265,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
         rm[bad], bm[bad] = r[i][bad], b[i][bad]
         return rm, bm
 
-    area0 = np.abs(_signed_areas(D, faces, r, b))
+    area0 = np.abs(signed_chart_areas(D, faces, r, b))
     for _ in range(int(iterations)):
         rm, bm = midpoints(r, b)
         X = lift(np.concatenate([r, rm]), np.concatenate([b, bm]))
@@ -287,7 +287,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
         r1[move], b1[move] = D.locate(r[move], newp)
         # Undo moves that turn a triangle over (or squeeze it flat) or lose a neighbour.
         for _ in range(4):
-            s = _signed_areas(D, faces, r1, b1)
+            s = signed_chart_areas(D, faces, r1, b1)
             bad_f = ~(s > 1e-3 * area0)
             bad_e = straddling(r1, b1)
             if not bad_f.any() and not bad_e.any():
