@@ -25,7 +25,7 @@ from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, es
                     relax_samples, sharpest_vertices)
 from .paths import apply_steps, refine_all, room_for_paths, trace_paths
 from .report import check_closed_manifold, fidelity
-from .snap import SNAP_ROUNDS, snap_tips
+from .snap import SNAP_GAIN, SNAP_ROUNDS, snap_tips
 
 __all__ = ["ManifoldParameterization", "ManifoldStructure", "manifold_map"]
 
@@ -208,12 +208,13 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     if not SNAP_ROUNDS:
         return r, b, pull
     # The input's tips that the chosen remesh cuts off get a sample each (manifold/snap.py),
-    # kept when the estimate finds the snapped remesh closer to the input.
+    # kept when the estimate finds the snapped remesh closer to the input by more than its
+    # rounding (SNAP_GAIN).
     rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, Xs[best], P, Fm, sharp, vertex_face,
                                    S.vertex_bary)
     moved = np.flatnonzero(source >= 0)
     if (not moved.size or _stretches(Xt, Xs[0], H.faces[-1])
-            or not estimated_distance(P, Fm, sharp, Xt, H.faces[-1]) < error):
+            or not estimated_distance(P, Fm, sharp, Xt, H.faces[-1]) < (1 - SNAP_GAIN) * error):
         return r, b, pull
     face, bary = pull if pull is not None else S.history.pull_back(r, b, verbose=False)
     face, bary = face.copy(), bary.copy()
