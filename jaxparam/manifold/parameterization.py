@@ -155,7 +155,7 @@ def _flattest(X, faces) -> float:
 
 
 def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H, levels: int,
-                     guarded: bool):
+                     guarded: bool, snap: bool = True):
     """The remesh's samples ``(r (n,), b (n, 3), pulled)`` (base face, barycentric
     coordinates, and their pull-back ``(face, bary)`` onto the input or ``None``) with the
     relaxation (see :meth:`ManifoldParameterization.remesh`).
@@ -173,8 +173,15 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     bunny 0.72 -> 0.77 % and rocker-arm 0.63 -> 0.73 %); otherwise the most relaxed one.
     Then the input's tips that the kept samples cut off are snapped to
     (:func:`~jaxparam.manifold.snap.snap_tips`; ``vertex_face (N,)`` and ``S.vertex_bary``
-    place them in the base domain), when the estimate finds the snapped remesh closer."""
-    P = S.positions
+    place them in the base domain), when the estimate finds the snapped remesh closer
+    (``snap``; :func:`_maps_route` chooses its base domain unsnapped and snaps the chosen one's
+    samples only, :func:`_snap_chosen`).
+
+    Everything here runs on the positions centred on their bounding box: the choices compare
+    lengths and distances, and on coordinates far from the origin their rounding decided some
+    of them (a jittered bumpy sphere moved by 1e3 got another remesh, 1.3 % of its diagonal
+    apart).  Only the samples' base faces and coordinates, and their pull-back, come out."""
+    P = S.positions - 0.5 * (S.positions.min(0) + S.positions.max(0))
 
     def lift(region, bary):
         face, bb = S.history.pull_back(region, bary, verbose=False)
@@ -197,29 +204,60 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     Xs = [sweep_lift(*plain)] + [np.einsum("kc,kcd->kd", bb, P[Fm[f]]) for f, bb in pulled]
     # Xs[0]: the plain samples, grid points, which the grid lifts exactly.
     kept = [i for i in range(1, len(Xs)) if not _stretches(Xs[i], Xs[0], H.faces[-1])]
-    sharp = sharpest_vertices(P, Fm)
-    if kept:
+    snap, sharp, error = bool(snap and SNAP_ROUNDS), None, None
+    if not kept:
+        best, (r, b), pull = 0, plain, None
+    elif len(kept) == 1 and not snap:
+        best = kept[0]
+        (r, b), pull = cands[best - 1], pulled[best - 1]
+    else:
+        sharp = sharpest_vertices(P, Fm)
         errors = [estimated_distance(P, Fm, sharp, Xs[i], H.faces[-1]) for i in kept]
         best = kept[int(np.argmin(errors))]
         (r, b), pull, error = cands[best - 1], pulled[best - 1], min(errors)
-    else:
-        best, (r, b), pull = 0, plain, None
-        error = estimated_distance(P, Fm, sharp, Xs[0], H.faces[-1]) if SNAP_ROUNDS else 0.0
-    if not SNAP_ROUNDS:
+    if not snap:
         return r, b, pull
-    # The input's tips that the chosen remesh cuts off get a sample each (manifold/snap.py),
-    # kept when the estimate finds the snapped remesh closer to the input by more than its
-    # rounding (SNAP_GAIN).
-    rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, Xs[best], P, Fm, sharp, vertex_face,
+    if sharp is None:
+        sharp = sharpest_vertices(P, Fm)
+        error = estimated_distance(P, Fm, sharp, Xs[best], H.faces[-1])
+    return _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, Xs[best], Xs[0], error)
+
+
+def _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, X, X0, error):
+    """The samples ``(r, b, pull)`` with the input's tips that their remesh (surface points
+    ``X``) cuts off snapped to (manifold/snap.py), when the estimated distance falls below
+    ``error`` by more than its rounding (:data:`~jaxparam.manifold.snap.SNAP_GAIN`) and the
+    remesh does not stretch past the plain samples' (``X0``); else the samples given."""
+    rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, X, P, Fm, sharp, vertex_face,
                                    S.vertex_bary)
     moved = np.flatnonzero(source >= 0)
-    if (not moved.size or _stretches(Xt, Xs[0], H.faces[-1])
+    if (not moved.size or _stretches(Xt, X0, H.faces[-1])
             or not estimated_distance(P, Fm, sharp, Xt, H.faces[-1]) < (1 - SNAP_GAIN) * error):
         return r, b, pull
     face, bary = pull if pull is not None else S.history.pull_back(r, b, verbose=False)
     face, bary = face.copy(), bary.copy()
     face[moved], bary[moved] = _vertex_corners(Fm, source[moved], P.shape[0])
     return rs, bs, (face, bary)
+
+
+def _snap_chosen(param, levels: int, H, r, b, pull):
+    """:func:`_snap` for samples that :func:`_relaxed_samples` chose without snapping (the
+    base domain :func:`_maps_route` keeps): what it needs is made again here."""
+    S = param.structure
+    P = S.positions - 0.5 * (S.positions.min(0) + S.positions.max(0))
+    Fm = np.asarray(param.mesh.faces, np.int64)
+    F0 = np.asarray(param.base_faces, np.int64)
+
+    def lift(region, bary):
+        face, bb = S.history.pull_back(region, bary, verbose=False)
+        return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
+
+    X = lift(r, b) if pull is None else np.einsum("kc,kcd->kd", pull[1], P[Fm[pull[0]]])
+    X0 = lift(*_dyadic_samples(F0, H, levels))
+    sharp = sharpest_vertices(P, Fm)
+    error = estimated_distance(P, Fm, sharp, X, H.faces[-1])
+    D = BaseDomain(P[param.base_vertices], F0)
+    return _snap(S, D, P, Fm, H, param.vertex_face, sharp, r, b, pull, X, X0, error)
 
 
 def _vertex_corners(F: np.ndarray, v: np.ndarray, n: int):
@@ -344,7 +382,7 @@ class ManifoldParameterization:
             raise MeshError(f"manifold remesh: levels must be an integer in [0, 8], got {levels!r}.")
         return self._remesh_from(*self._samples(int(levels), relax))
 
-    def _samples(self, levels: int, relax):
+    def _samples(self, levels: int, relax, snap: bool = True):
         """``(H, r, b, pulled)``: the dyadic hierarchy of the base domain and the samples of
         :meth:`remesh` (see :func:`_relaxed_samples`); those of ``structure.samples`` when
         it holds them (``relax=None``)."""
@@ -364,7 +402,7 @@ class ManifoldParameterization:
                                 "jp.manifold_map(mesh, method='maps'); pass relax=False.")
             r, b, pulled = _relaxed_samples(S, self.base_vertices, self.vertex_face,
                                             np.asarray(self.mesh.faces), F0,
-                                            H, levels, guarded)
+                                            H, levels, guarded, snap)
         else:
             (r, b), pulled = _dyadic_samples(F0, H, levels), None
         return H, r, b, pulled
@@ -551,14 +589,16 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
             return out
         if sharp is None:
             sharp = sharpest_vertices(V, Fm)
-        samples = out[1]._samples(SELECT_LEVEL, None)
+        samples = out[1]._samples(SELECT_LEVEL, None, snap=False)   # snapped once chosen
         semi = out[1]._remesh_from(*samples)
         err = estimated_distance(V, Fm, sharp, np.asarray(semi.mesh.vertices), semi.mesh.faces)
         if best is None or err < best[0]:
             best = (err, out, samples)
     # Keep the chosen remesh's samples (issue 13): param.remesh(SELECT_LEVEL), which the CLI
     # and most callers ask for next, then only lifts them (the same arrays, not relaxed again).
-    _, (base, param), (_, r, b, pulled) = best
+    _, (base, param), (H, r, b, pulled) = best
+    if SNAP_ROUNDS:
+        r, b, pulled = _snap_chosen(param, SELECT_LEVEL, H, r, b, pulled)
     S = replace(param.structure, samples=((SELECT_LEVEL, r, b, pulled),))
     return base, replace(param, structure=S)
 
