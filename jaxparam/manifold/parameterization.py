@@ -181,12 +181,8 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     lengths and distances, and on coordinates far from the origin their rounding decided some
     of them (a jittered bumpy sphere moved by 1e3 got another remesh, 1.3 % of its diagonal
     apart).  Only the samples' base faces and coordinates, and their pull-back, come out."""
-    P = S.positions - 0.5 * (S.positions.min(0) + S.positions.max(0))
-
-    def lift(region, bary):
-        face, bb = S.history.pull_back(region, bary, verbose=False)
-        return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
-
+    P = _centred(S.positions)
+    lift = _lift_with(S, P, Fm)
     D = BaseDomain(P[base_vertices], F0)
     m0, n = F0.shape[0], H.counts[-1]
     use_grid = GridLift.points(m0, levels + 1) <= GRID_MAX_POINTS
@@ -244,20 +240,30 @@ def _snap_chosen(param, levels: int, H, r, b, pull):
     """:func:`_snap` for samples that :func:`_relaxed_samples` chose without snapping (the
     base domain :func:`_maps_route` keeps): what it needs is made again here."""
     S = param.structure
-    P = S.positions - 0.5 * (S.positions.min(0) + S.positions.max(0))
+    P = _centred(S.positions)
     Fm = np.asarray(param.mesh.faces, np.int64)
     F0 = np.asarray(param.base_faces, np.int64)
-
-    def lift(region, bary):
-        face, bb = S.history.pull_back(region, bary, verbose=False)
-        return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
-
+    lift = _lift_with(S, P, Fm)
     X = lift(r, b) if pull is None else np.einsum("kc,kcd->kd", pull[1], P[Fm[pull[0]]])
     X0 = lift(*_dyadic_samples(F0, H, levels))
     sharp = sharpest_vertices(P, Fm)
     error = estimated_distance(P, Fm, sharp, X, H.faces[-1])
     D = BaseDomain(P[param.base_vertices], F0)
     return _snap(S, D, P, Fm, H, param.vertex_face, sharp, r, b, pull, X, X0, error)
+
+
+def _centred(P: np.ndarray) -> np.ndarray:
+    """Positions ``P (n, 3)`` less the centre of their bounding box."""
+    return P - 0.5 * (P.min(0) + P.max(0))
+
+
+def _lift_with(S: ManifoldStructure, P: np.ndarray, Fm: np.ndarray):
+    """``lift(r (k,), b (k, 3)) -> (k, 3)``: base-domain points pulled back through the
+    decimation's history onto the input faces ``Fm`` over positions ``P``."""
+    def lift(region, bary):
+        face, bb = S.history.pull_back(region, bary, verbose=False)
+        return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
+    return lift
 
 
 def _vertex_corners(F: np.ndarray, v: np.ndarray, n: int):
