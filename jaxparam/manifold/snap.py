@@ -94,12 +94,13 @@ def snap_tips(D: BaseDomain, faces: np.ndarray, r: np.ndarray, b: np.ndarray, X:
         free = np.flatnonzero(~pinned & (source < 0))
         if not far.size or not free.size:
             break
-        dist = dict(zip(tips.tolist(), d.tolist()))
+        dist = np.zeros(P.shape[0])                        # each tip's distance, by vertex
+        dist[tips] = d
         # Each tip tries its CANDIDATES nearest samples, each move alone, and takes the one
         # that bends the faces around it least (within the guards).
         k = min(CANDIDATES, free.size)
         near = free[cKDTree(X[free]).query(P[far], k=k)[1].reshape(far.size, k)]
-        tip_d = np.array([dist[t] for t in far.tolist()])
+        tip_d = dist[far]
         ok, off = _alone(D, faces, ptr, corner_order, r, b, X, pinned, area0, P, F,
                          near.ravel(), np.repeat(far, k), vertex_face, vertex_bary)
         score = np.where(ok & (off <= BEND * np.repeat(tip_d, k)), off, np.inf).reshape(far.size, k)
@@ -113,18 +114,15 @@ def snap_tips(D: BaseDomain, faces: np.ndarray, r: np.ndarray, b: np.ndarray, X:
         r1, b1, X1 = r.copy(), b.copy(), X.copy()
         r1[s], b1[s], X1[s] = vertex_face[v], vertex_bary[v], P[v]
         limit = np.full(n, np.inf)                        # a moved sample's tip distance
-        limit[s] = [dist[t] for t in v.tolist()]
+        limit[s] = dist[v]
         moved = np.zeros(n, bool)
         moved[s] = True
         while moved.any():
-            ms = np.flatnonzero(moved)
-            counts = ptr[ms + 1] - ptr[ms]
-            at = np.repeat(ptr[ms] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-            fs = np.unique(corner_order[at] // 3)
+            fs = np.unique(_faces_around(ptr, corner_order, np.flatnonzero(moved))[0])
             # A move must not turn a face over, draw it across a base vertex, or bend a face
             # farther from the input than the tip was from the remesh.
-            near = np.einsum("pc,fcd->fpd", _FACE_POINTS, X1[faces[fs]])
-            off = point_triangle_distance(near.reshape(-1, 3), P, F)[0].reshape(fs.size, -1).max(1)
+            pts = np.einsum("pc,fcd->fpd", _FACE_POINTS, X1[faces[fs]])
+            off = point_triangle_distance(pts.reshape(-1, 3), P, F)[0].reshape(fs.size, -1).max(1)
             bad = fs[~(signed_chart_areas(D, faces[fs], r1, b1) > 1e-3 * area0[fs])
                      | _across_a_corner(D, faces[fs], r1, pinned)
                      | (off > BEND * np.where(moved[faces[fs]], limit[faces[fs]], np.inf).min(1))]
@@ -152,10 +150,7 @@ def _alone(D, faces, ptr, corner_order, r, b, X, pinned, area0, P, F, s, v, vert
     distance from the input of their :data:`_FACE_POINTS`.  The moved samples are appended
     as new samples ``n + i``, and each move's faces drawn over them."""
     n, p = X.shape[0], s.size
-    counts = ptr[s + 1] - ptr[s]
-    at = np.repeat(ptr[s] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    fid = corner_order[at] // 3
-    pair = np.repeat(np.arange(p), counts)
+    fid, pair = _faces_around(ptr, corner_order, s)
     tri = np.where(faces[fid] == s[pair][:, None], (n + pair)[:, None], faces[fid])
     r2 = np.concatenate([r, vertex_face[v]])
     b2 = np.concatenate([b, vertex_bary[v]])
@@ -171,6 +166,14 @@ def _alone(D, faces, ptr, corner_order, r, b, X, pinned, area0, P, F, s, v, vert
     off = np.zeros(p)
     np.maximum.at(off, pair, dist)
     return np.bincount(pair, ~good, minlength=p) == 0, off
+
+
+def _faces_around(ptr, corner_order, s):
+    """``(faces (q,), owner (q,))``: the faces around each sample ``s[i]`` (from the corners'
+    CSR ``ptr``, ``corner_order``), and ``i`` for each."""
+    counts = ptr[s + 1] - ptr[s]
+    at = np.repeat(ptr[s] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    return corner_order[at] // 3, np.repeat(np.arange(s.size), counts)
 
 
 def _longest_edges(T: np.ndarray) -> np.ndarray:
