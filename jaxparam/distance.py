@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["closest_points_on_triangles", "point_triangle_distance", "sample_surface",
+__all__ = ["closest_points_on_triangles", "point_triangle_distance", "sample_surface", "face_grid_points",
            "surface_distance", "SurfaceDistance", "bounding_diagonal"]
 
 
@@ -181,6 +181,16 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
     return d_out, f_out, q_out
 
 
+def face_grid_points(V, F, g: int) -> np.ndarray:
+    """``(m q, 3)``: on each face of ``(V (n, 3), F (m, 3))`` the points of a barycentric grid
+    of step ``1/g`` without the corners, ``q = (g + 1)(g + 2)/2 - 3`` per face."""
+    ij = np.array([(i, j) for i in range(g + 1) for j in range(g + 1 - i)
+                   if max(i, j, g - i - j) < g], np.float64).reshape(-1, 2)
+    B = np.column_stack([ij, g - ij.sum(1)]) / max(g, 1)
+    T = np.asarray(V, np.float64)[np.asarray(F, np.int64)]
+    return np.einsum("qc,fcd->fqd", B, T).reshape(-1, 3)
+
+
 def sample_surface(V, F, n: int, *, seed: int = 0):
     """``(points (n, 3), face (n,))``: ``n`` points uniformly distributed by area on the mesh.
 
@@ -234,12 +244,19 @@ class SurfaceDistance:
                 "rms_ba": self.rms_ba, "diagonal": self.diagonal, "samples": self.samples}
 
 
-def surface_distance(V_a, F_a, V_b, F_b, *, samples: int = 50_000, seed: int = 0) -> SurfaceDistance:
+def surface_distance(V_a, F_a, V_b, F_b, *, samples: int = 50_000, seed: int = 0,
+                     face_grid: int = 0) -> SurfaceDistance:
     """Hausdorff and RMS distances both ways between meshes A and B, by sampling.
 
     ``samples`` area-weighted points are drawn on each surface (``seed`` fixed), plus each
     surface's vertices; each point's exact distance to the other mesh is measured with
     :func:`point_triangle_distance`.  Values are relative to A's bounding-box diagonal.
+
+    ``face_grid = g > 0`` adds, on every face of both meshes, the points of a barycentric grid
+    of step ``1/g`` (``(g + 1)(g + 2)/2 - 3`` per face): random samples fall on a large face in
+    proportion to its area and can miss its farthest point.  A level-4 remesh of cow (25,600
+    faces) has its farthest point 0.607 % of the diagonal from the input with ``g = 8`` and
+    0.495 % with the 50,000 samples alone.  The RMS then weighs the grid points too.
     """
     V_a = np.asarray(V_a, dtype=np.float64)
     V_b = np.asarray(V_b, dtype=np.float64)
@@ -249,7 +266,8 @@ def surface_distance(V_a, F_a, V_b, F_b, *, samples: int = 50_000, seed: int = 0
 
     def one_way(Vs, Fs, Vt, Ft, s):
         pts, _ = sample_surface(Vs, Fs, samples, seed=s)
-        d, _, _ = point_triangle_distance(np.concatenate([pts, Vs]), Vt, Ft)
+        extra = [face_grid_points(Vs, Fs, int(face_grid))] if face_grid > 0 else []
+        d, _, _ = point_triangle_distance(np.concatenate([pts, Vs, *extra]), Vt, Ft)
         return float(d.max()) / diag, float(np.sqrt(np.mean(d * d))) / diag
 
     h_ab, r_ab = one_way(V_a, F_a, V_b, F_b, seed)

@@ -4,7 +4,8 @@ import pytest
 import trimesh
 
 from jaxparam.distance import (
-    bounding_diagonal, closest_points_on_triangles, point_triangle_distance, sample_surface,
+    bounding_diagonal, closest_points_on_triangles, face_grid_points, point_triangle_distance,
+    sample_surface,
     surface_distance,
 )
 
@@ -72,3 +73,21 @@ def test_sample_surface_is_area_weighted_and_reproducible():
     np.testing.assert_array_equal(P, P2)
     d, _, _ = point_triangle_distance(P, V, F)
     assert d.max() < 1e-12
+
+
+def test_face_grid_finds_the_farthest_point_that_samples_miss():
+    # A flat square against a tent over it: the square's point farthest from the tent is its
+    # centre (the midpoint of its diagonal), h / sqrt(1 + h^2) from the tent's faces.  Twenty
+    # random samples miss it; a grid of step 1/8 on every face holds it.
+    h = 0.5
+    square = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    F_sq = np.array([[0, 1, 2], [0, 2, 3]])
+    tent = np.vstack([square, [[0, 0, h]]])
+    F_tent = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    diag = np.linalg.norm(np.ptp(tent, 0))
+    exact = h / np.sqrt(1 + h * h) / diag
+    sampled = surface_distance(tent, F_tent, square, F_sq, samples=20, seed=0)
+    grid = surface_distance(tent, F_tent, square, F_sq, samples=20, seed=0, face_grid=8)
+    assert sampled.hausdorff_ba < 0.95 * exact
+    assert grid.hausdorff_ba == pytest.approx(exact, rel=1e-12)
+    assert face_grid_points(square, F_sq, 8).shape == (2 * (45 - 3), 3)

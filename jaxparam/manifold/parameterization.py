@@ -11,6 +11,7 @@ from .. import topology as topo
 from .. import weights as wts
 from ..options import choose
 from ..errors import MeshError, SolverError
+from ..distance import point_triangle_distance
 from ..host import face_areas
 from ..mesh import TriMesh
 from ..io import as_mesh
@@ -25,7 +26,7 @@ from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, es
                     relax_samples, sharpest_vertices)
 from .paths import apply_steps, refine_all, room_for_paths, trace_paths
 from .report import check_closed_manifold, fidelity
-from .snap import SNAP_GAIN, SNAP_ROUNDS, snap_tips
+from .snap import SNAP_GAIN, SNAP_ROUNDS, bend, snap_tips
 
 __all__ = ["ManifoldParameterization", "ManifoldStructure", "manifold_map"]
 
@@ -227,13 +228,31 @@ def _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, X, X0, error):
     rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, X, P, Fm, sharp, vertex_face,
                                    S.vertex_bary)
     moved = np.flatnonzero(source >= 0)
-    if (not moved.size or _stretches(Xt, X0, H.faces[-1])
-            or not estimated_distance(P, Fm, sharp, Xt, H.faces[-1]) < (1 - SNAP_GAIN) * error):
+    if not moved.size or _stretches(Xt, X0, H.faces[-1]) or not _snap_gains(
+            P, Fm, sharp, X, Xt, H.faces[-1], moved, error):
         return r, b, pull
     face, bary = pull if pull is not None else S.history.pull_back(r, b, verbose=False)
     face, bary = face.copy(), bary.copy()
     face[moved], bary[moved] = _vertex_corners(Fm, source[moved], P.shape[0])
     return rs, bs, (face, bary)
+
+
+def _snap_gains(P, Fm, sharp, X, Xt, G, moved, error) -> bool:
+    """Whether the snapped remesh ``(Xt, G)`` is closer to the input ``(P, Fm)`` than the one
+    over ``X`` (whose estimated distance is ``error``): the estimate
+    (:func:`~jaxparam.manifold.relax.estimated_distance`) joined with how far the faces around
+    the ``moved`` samples stand off the input (:func:`~jaxparam.manifold.snap.bend`), is lower
+    by more than :data:`~jaxparam.manifold.snap.SNAP_GAIN`; or it is not higher and the sharp
+    vertices' distance to the remesh is lower.  (Decimated-knight's estimate peaks on a long
+    edge across a saddle, which no snap touches: strictly lower refused its snapped tips,
+    0.53 -> 0.51 % of the diagonal.)"""
+    around = np.isin(G, moved).any(1)
+    before = max(error, float(bend(X[G[around]], P, Fm).max(initial=0.0)))
+    after = max(estimated_distance(P, Fm, sharp, Xt, G), float(bend(Xt[G[around]], P, Fm).max(initial=0.0)))
+    if after < (1 - SNAP_GAIN) * before:
+        return True
+    tips = lambda Y: point_triangle_distance(P[sharp], Y, G)[0].max(initial=0.0)
+    return after <= (1 + SNAP_GAIN) * before and tips(Xt) < (1 - SNAP_GAIN) * tips(X)
 
 
 def _snap_chosen(param, levels: int, H, r, b, pull):

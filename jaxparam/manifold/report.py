@@ -76,12 +76,17 @@ class ManifoldReport:
         return asdict(self)
 
 
-def fidelity(param, semi, mesh, *, samples: int = 20_000, seed: int = 0) -> ManifoldReport:
+def fidelity(param, semi, mesh, *, samples: int = 20_000, seed: int = 0,
+             face_grid: int = 0) -> ManifoldReport:
     """The :class:`ManifoldReport` of remesh ``semi`` (a :class:`~jaxparam.remesh.Remesh`)
-    of ``mesh`` through ``param`` (a :class:`~jaxparam.manifold.ManifoldParameterization`)."""
+    of ``mesh`` through ``param`` (a :class:`~jaxparam.manifold.ManifoldParameterization`).
+    ``samples``, ``seed`` and ``face_grid`` are
+    :func:`~jaxparam.distance.surface_distance`'s (a grid on every face finds a large face's
+    farthest point, which random samples can miss)."""
     V = np.asarray(mesh.vertices, np.float64)
     X = np.asarray(semi.mesh.vertices, np.float64)
-    d = surface_distance(V, mesh.faces, X, semi.mesh.faces, samples=samples, seed=seed)
+    d = surface_distance(V, mesh.faces, X, semi.mesh.faces, samples=samples, seed=seed,
+                         face_grid=face_grid)
     # Area distortion per base triangle: the surface area of the remesh faces above it.
     F = semi.mesh.faces
     area = 0.5 * np.linalg.norm(np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]]), axis=1)
