@@ -47,8 +47,9 @@ SNAP_SHARE = 0.5
 #: A move is undone when a point of the faces around the sample lies farther from the input
 #: than this share of the tip's distance from the remesh before the move.
 BEND = 1.0
-#: How many of the samples nearest to a tip (in 3D) it tries.
-CANDIDATES = 4
+#: How many of the samples nearest to a tip (in 3D) it tries (4 left cow's input -> remesh at
+#: 0.538 % of the diagonal, 8 at 0.491 %).
+CANDIDATES = 8
 #: The snapped samples are kept when they lower the estimated distance to the input by more
 #: than this share: an estimate whose maximum lies elsewhere is unchanged by the snapping up
 #: to rounding (1e-7 relative for a mesh far from the origin), which is no gain.
