@@ -592,3 +592,29 @@ def test_snapping_moves_nothing_when_no_tip_is_off_the_remesh():
     out = snap_tips(D, F, r, b, V, V, F, np.arange(3), r, b)
     assert np.all(out[3] == -1)
     np.testing.assert_array_equal(out[2], V)
+
+
+def test_noise_at_the_edge_scale_is_told_from_bending_and_decimated_smoothed(monkeypatch):
+    # maps.noise_dominates: neighbours' umbrella offsets along the normal are anti-correlated
+    # under white noise and correlated on a bending surface, however coarse (a 20-face
+    # icosahedron, a torus). A noisy sphere is decimated on smoothed positions, and its map
+    # is still a bijection onto the base domain built on the input's own positions.
+    import jaxparam.manifold.parameterization as pz
+    from jaxparam.manifold.maps import decision_positions, noise_dominates
+
+    fine, coarse, torus = jp.shapes.sphere(3), jp.shapes.sphere(0), jp.shapes.torus()
+    for m in (fine, coarse, torus):
+        W, G = np.asarray(m.vertices), np.asarray(m.faces)
+        assert not noise_dominates(W, G)
+        np.testing.assert_array_equal(decision_positions(W, G), W)
+    V, F = np.asarray(fine.vertices), np.asarray(fine.faces)
+    edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    noisy = V + np.random.default_rng(0).normal(0, 0.3 * edge, V.shape)
+    assert noise_dominates(noisy, F)
+    seen = []
+    real = pz.decimate_caps
+    monkeypatch.setattr(pz, "decimate_caps", lambda W, *a, **k: seen.append(W) or real(W, *a, **k))
+    _check(jp.TriMesh(noisy, F), 20, levels=2)
+    assert len(seen) == 1 and not np.allclose(seen[0], noisy)
+    # The smoothed positions are closer to the sphere than the noisy ones.
+    assert np.std(np.linalg.norm(seen[0], axis=1)) < 0.5 * np.std(np.linalg.norm(noisy, axis=1))

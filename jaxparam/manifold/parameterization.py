@@ -20,7 +20,7 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .maps import AREA_CAPS, decimate_caps
+from .maps import AREA_CAPS, decimate_caps, decision_positions
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
                     relax_samples, sharpest_vertices)
@@ -606,7 +606,7 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     best, sharp = None, None
     # The decimations run together while they make the same collapses (issue 13); each
     # result is the one decimating with its cap alone gives, or the error it raises.
-    for decimated in decimate_caps(V, Fm, base_faces, caps, verbose=verbose):
+    for decimated in decimate_caps(decision_positions(V, Fm), Fm, base_faces, caps, verbose=verbose):
         if isinstance(decimated, SolverError):
             raise decimated
         out = _maps_param(mesh, V, decimated)
