@@ -172,6 +172,7 @@ def test_bad_input_is_refused_before_any_work_with_the_place_named():
         manifold_map(s, 20, method="lscm")
 
 
+@pytest.mark.slow          # 11 s; the suite's non-slow run reached 627 s on a clean clone
 def test_several_components_are_parameterized_one_at_a_time():
     from jaxparam.manifold import manifold_map_each
 
@@ -258,6 +259,7 @@ def test_level_4_lies_within_one_or_two_percent_of_the_diagonal_at_100_base_face
     assert rep.hausdorff < bound and rep.rms < bound / 10, rep
 
 
+@pytest.mark.slow          # 14 s; the suite's non-slow run reached 627 s on a clean clone
 @pytest.mark.data
 def test_relaxing_the_samples_across_base_edges_brings_the_remesh_closer():
     """The default remesh relaxes the samples in the base domain (error-driven, across base
@@ -594,12 +596,16 @@ def test_snapping_moves_nothing_when_no_tip_is_off_the_remesh():
     np.testing.assert_array_equal(out[2], V)
 
 
-def test_noise_at_the_edge_scale_is_told_from_bending_and_decimated_smoothed(monkeypatch):
+def _noisy_sphere(V, F):
+    """The sphere's vertices with Gaussian noise of 0.3 of its mean edge (seed 0)."""
+    edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    return V + np.random.default_rng(0).normal(0, 0.3 * edge, V.shape)
+
+
+def test_noise_at_the_edge_scale_is_told_from_bending():
     # maps.noise_dominates: neighbours' umbrella offsets along the normal are anti-correlated
     # under white noise and correlated on a bending surface, however coarse (a 20-face
-    # icosahedron, a torus). A noisy sphere is decimated on smoothed positions, and its map
-    # is still a bijection onto the base domain built on the input's own positions.
-    import jaxparam.manifold.parameterization as pz
+    # icosahedron, a torus), and only there are the positions given back as they are.
     from jaxparam.manifold.maps import decision_positions, noise_dominates
 
     fine, coarse, torus = jp.shapes.sphere(3), jp.shapes.sphere(0), jp.shapes.torus()
@@ -608,9 +614,18 @@ def test_noise_at_the_edge_scale_is_told_from_bending_and_decimated_smoothed(mon
         assert not noise_dominates(W, G)
         np.testing.assert_array_equal(decision_positions(W, G), W)
     V, F = np.asarray(fine.vertices), np.asarray(fine.faces)
-    edge = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
-    noisy = V + np.random.default_rng(0).normal(0, 0.3 * edge, V.shape)
-    assert noise_dominates(noisy, F)
+    assert noise_dominates(_noisy_sphere(V, F), F)
+
+
+@pytest.mark.slow          # 8 s
+def test_a_noisy_sphere_is_decimated_on_smoothed_positions_and_mapped_on_its_own(monkeypatch):
+    # The decimation takes the smoothed positions; the map is still a bijection onto the base
+    # domain, built on the input's own positions (_check lifts every vertex back).
+    import jaxparam.manifold.parameterization as pz
+
+    fine = jp.shapes.sphere(3)
+    V, F = np.asarray(fine.vertices), np.asarray(fine.faces)
+    noisy = _noisy_sphere(V, F)
     seen = []
     real = pz.decimate_caps
     monkeypatch.setattr(pz, "decimate_caps", lambda W, *a, **k: seen.append(W) or real(W, *a, **k))
