@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["closest_points_on_triangles", "point_triangle_distance", "sample_surface", "face_grid_points",
+__all__ = ["closest_points_on_triangles", "point_triangle_distance", "sample_surface", "face_grid_points", "grid_barycentric",
            "surface_distance", "SurfaceDistance", "bounding_diagonal"]
 
 
@@ -184,11 +184,16 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
 def face_grid_points(V, F, g: int) -> np.ndarray:
     """``(m q, 3)``: on each face of ``(V (n, 3), F (m, 3))`` the points of a barycentric grid
     of step ``1/g`` without the corners, ``q = (g + 1)(g + 2)/2 - 3`` per face."""
+    T = np.asarray(V, np.float64)[np.asarray(F, np.int64)]
+    return np.einsum("qc,fcd->fqd", grid_barycentric(g), T).reshape(-1, 3)
+
+
+def grid_barycentric(g: int) -> np.ndarray:
+    """``(q, 3)``: the barycentric points of a grid of step ``1/g`` on a triangle, without its
+    corners, ``q = (g + 1)(g + 2)/2 - 3``."""
     ij = np.array([(i, j) for i in range(g + 1) for j in range(g + 1 - i)
                    if max(i, j, g - i - j) < g], np.float64).reshape(-1, 2)
-    B = np.column_stack([ij, g - ij.sum(1)]) / max(g, 1)
-    T = np.asarray(V, np.float64)[np.asarray(F, np.int64)]
-    return np.einsum("qc,fcd->fqd", B, T).reshape(-1, 3)
+    return np.column_stack([ij, g - ij.sum(1)]) / max(g, 1)
 
 
 def sample_surface(V, F, n: int, *, seed: int = 0):

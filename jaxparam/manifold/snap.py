@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..distance import point_triangle_distance
+from ..distance import grid_barycentric, point_triangle_distance
 from .relax import BaseDomain, signed_chart_areas
 
 __all__ = ["snap_tips", "bend", "SNAP_ROUNDS", "SNAP_SHARE", "BEND", "CANDIDATES", "SNAP_GAIN"]
@@ -33,8 +33,7 @@ __all__ = ["snap_tips", "bend", "SNAP_ROUNDS", "SNAP_SHARE", "BEND", "CANDIDATES
 #: without the corners (which lie on the input).  Seven points (centroid, edge midpoints, near
 #: the corners) missed a bend of 0.6 % of cow's diagonal between them.
 _GRID = 6
-_FACE_POINTS = np.array([[i, j, _GRID - i - j] for i in range(_GRID + 1) for j in range(_GRID + 1 - i)
-                         if max(i, j, _GRID - i - j) < _GRID], np.float64) / _GRID
+_FACE_POINTS = grid_barycentric(_GRID)
 #: The fewer points that screen each tip's candidate moves (centroid, edge midpoints, near the
 #: corners): a third of the cost; the chosen moves are measured on the full grid.
 _SCREEN_POINTS = np.array([[2, 2, 2], [3, 3, 0], [0, 3, 3], [3, 0, 3], [4, 1, 1], [1, 4, 1],
