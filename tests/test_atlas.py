@@ -332,6 +332,27 @@ def test_fill_contact_keeps_margins_and_turns_and_touches():
     assert smallest(pack.fill_contact) <= 1.1 * smallest(pack.fill_square)
 
 
+def test_fill_contact_places_only_its_lead_by_contact():
+    # lead=0 is the bottom-left fill, position for position; lead=2 places the two largest
+    # masks where the most-contact fill does and the rest where a bottom-left fill would
+    # around them, so its layout differs from both whole fills
+    masks = _u_and_blobs()
+    margin, size = 2, 64
+    by_lowest = pack.fill_square(masks, size, margin)
+    by_contact = pack.fill_contact(masks, size, margin)
+    as_lowest = pack.fill_contact(masks, size, margin, lead=0)
+    assert all(np.array_equal(a, b) for a, b in zip(as_lowest, by_lowest))
+    whole = pack.fill_contact(masks, size, margin, lead=len(masks))
+    assert all(np.array_equal(a, b) for a, b in zip(whole, by_contact))
+    mixed = pack.fill_contact(masks, size, margin, lead=2)
+    order = np.argsort([-m.sum() for m in masks], kind="stable")
+    lead = order[:2]
+    assert np.array_equal(mixed[0][lead], by_contact[0][lead])
+    assert np.array_equal(mixed[1][lead], by_contact[1][lead])
+    assert not np.array_equal(mixed[0], by_contact[0])
+    assert not np.array_equal(mixed[0], by_lowest[0])
+
+
 def test_plan_splits_cuts_a_u_into_convex_disks_and_leaves_a_square():
     # a flat U flattened as itself: one cut makes two disks whose hulls hold much less
     # area than the U's hull; a square is not worth a cut; max_new caps the new charts

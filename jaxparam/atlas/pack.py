@@ -33,7 +33,9 @@ touches the most placed charts' margins and the square's border; FFT correlation
 four times the bottom-left fill's time): neither wins on every set of charts, and the
 coverage depends only on the scale that fits (session 10, same charts: bunny 66.0 -> 70.3 %,
 decimated-knight 70.3 -> 71.3 %, 3holes 69.5 -> 70.0 %; cow, camel_b, camelhead, rocker-arm
-and halftunnel unchanged).
+and halftunnel unchanged).  The most-contact fill places the :data:`CONTACT_CHARTS` largest
+charts, the rest bottom-left: a noisy mesh's thousands of small charts would cost 15 ms each
+in FFTs (session 18).
 """
 from __future__ import annotations
 
@@ -253,10 +255,10 @@ def _inside(turns, occb, W, H, samples: int = 24, chunk: int = 512, chunks: int 
         if by.size == 0:
             continue
         pick = np.unique(np.linspace(0, by.size - 1, min(samples, by.size)).astype(np.int64))
-        cand = np.ones((jn, in_), bool)
+        hit = np.zeros((jn, in_), bool)       # in place: no temporary per sample
         for y, x in zip(by[pick], bx[pick]):
-            cand &= ~occb[y:y + jn, x:x + in_]
-        idx = np.flatnonzero(cand)
+            hit |= occb[y:y + jn, x:x + in_]
+        idx = np.flatnonzero(~hit)
         if best is not None:                  # only positions before the best so far
             idx = idx[idx // in_ * (1 << 12) + idx % in_ < best[0]]
         found = None
@@ -393,11 +395,13 @@ def fill_square(masks, size: int, margin: int, order: np.ndarray | None = None):
     then leftmost free position over its four proper turns (bottom-left fill), at least
     ``margin`` cells apart.  **Returns:** ``None`` if one does not fit, else
     ``(positions (c, 2) cells [u, v], turn (c,) int, size)``."""
-    def lowest(turns, occb, size):
-        best = _inside(turns, occb, size, size)
-        return best if best is not None else _lowest_free(turns, occb, size)
+    return _fill(masks, size, margin, order, _lowest)
 
-    return _fill(masks, size, margin, order, lowest)
+
+def _lowest(turns, occb, size):
+    """:func:`fill_square`'s placement: the lowest, then leftmost free position."""
+    best = _inside(turns, occb, size, size)
+    return best if best is not None else _lowest_free(turns, occb, size)
 
 
 def _fill(masks, size: int, margin: int, order, place):
@@ -467,20 +471,41 @@ def _most_contact(turns, occb, size, keep: int = 8):
     return None
 
 
-def fill_contact(masks, size: int, margin: int, order: np.ndarray | None = None):
+def fill_contact(masks, size: int, margin: int, order: np.ndarray | None = None,
+                 lead: int | None = None):
     """Place masks (largest first) in a fixed ``size x size`` raster, each at the free
     position (over its four proper turns) where it touches the most placed masks' margins
-    and the square's border (:func:`_most_contact`), at least ``margin`` cells apart.
+    and the square's border (:func:`_most_contact`), at least ``margin`` cells apart;
+    with ``lead``, only the first ``lead`` masks so, the rest as :func:`fill_square` places
+    them (lowest, then leftmost).
     Tighter than :func:`fill_square` on some sets of ragged charts, looser on others
     (session 10, same charts, with both tried at each scale: bunny 66.0 -> 70.3 %,
     decimated-knight 70.3 -> 71.3 %, 3holes 69.5 -> 70.0 %).  **Returns:** ``None`` if one
     does not fit, else ``(positions (c, 2) cells [u, v], turn (c,) int, size)``."""
-    return _fill(masks, size, margin, order, _most_contact)
+    if lead is None or lead >= len(masks):
+        return _fill(masks, size, margin, order, _most_contact)
+    placed = [0]
+
+    def place(turns, occb, size):
+        placed[0] += 1
+        return (_most_contact if placed[0] <= lead else _lowest)(turns, occb, size)
+
+    return _fill(masks, size, margin, order, place)
+
+
+#: How many charts (the largest) :func:`pack_charts`'s most-contact fill places; the rest
+#: go bottom-left.  Its FFT search costs about 15 ms a chart at 512 cells a side, at every
+#: scale the bottom-left fill fails, and a noisy mesh's charts number in the thousands:
+#: rocker-arm with Gaussian noise of 0.2 % of its diagonal has 1,537 charts, whose packing
+#: took 148 s (63.2 % covered) with every chart placed by contact, 63 s (62.1 %) with 300,
+#: 23 s (60.6 %) with none (session 18, issue 18).  The shared meshes have 11-160 charts.
+CONTACT_CHARTS = 300
 
 
 def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 1024,
                 margin_texels: int = 2, fill: float = 0.72, max_attempts: int = 5,
-                refine_steps: int = 6, refine_gain: float = 1.12) -> Packing:
+                refine_steps: int = 6, refine_gain: float = 1.12,
+                contact_charts: int = CONTACT_CHARTS) -> Packing:
     """Pack the charts' UVs (``uv (n_uv, 2)`` at 3D scale) into ``[0, 1]^2``.
 
     **Arguments:** ``uv_faces (m, 3)``, ``chart (m,)`` face charts, ``uv_chart (n_uv,)``,
@@ -491,7 +516,9 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     on the scale in the fixed square (:func:`fill_square`, else :func:`fill_contact` at each),
     between the growing-square packing's and ``refine_gain`` times its covered area (0: none;
     6 resolve the area to 0.2 %: against 4, session 10, same charts, 3holes 70.0 -> 70.4 %,
-    camelhead 72.1 -> 72.4 %, cow 71.7 -> 71.9 %, rocker-arm 70.7 -> 71.0 %, none lower).
+    camelhead 72.1 -> 72.4 %, cow 71.7 -> 71.9 %, rocker-arm 70.7 -> 71.0 %, none lower);
+    ``contact_charts``: the most-contact fill places at most this many charts, the largest;
+    the rest go bottom-left (:data:`CONTACT_CHARTS`).
     **Returns:** a :class:`Packing`.
     """
     k = int(chart.max()) + 1
@@ -552,7 +579,7 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
         placed = fill_square(masks, inner, m)
         attempt += 1
         if placed is None:
-            placed = fill_contact(masks, inner, m)
+            placed = fill_contact(masks, inner, m, lead=int(contact_charts))
             attempt += 1
         if placed is None:
             hi = s
