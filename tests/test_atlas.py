@@ -394,6 +394,21 @@ def test_compaction_packs_three_us_tighter_and_keeps_their_isometry():
         atlas(mesh, compact=-1)
 
 
+def test_compaction_is_skipped_above_its_chart_count(monkeypatch):
+    # three Us compact (the test above) unless there are more charts than COMPACT_CHARTS
+    import importlib
+    build = importlib.import_module("jaxparam.atlas.build")
+    u = u_shape()
+    V0, F0 = np.asarray(u.vertices), u.faces
+    mesh = jp.TriMesh(np.concatenate([V0 + [1.5 * i, 0, 0] for i in range(3)]),
+                      np.concatenate([F0 + i * V0.shape[0] for i in range(3)]))
+    monkeypatch.setattr(build, "COMPACT_CHARTS", 2)
+    monkeypatch.setattr(build, "_compact", lambda *a, **k: pytest.fail("compacted 3 charts"))
+    a = atlas(mesh, compact=1.0)
+    assert a.n_charts == 3 and "compact" in a.stats.seconds
+    check_atlas(mesh, a, min_coverage=0.4)
+
+
 # ---------------------------------------------------------------- atlases
 
 def test_sphere_atlas():

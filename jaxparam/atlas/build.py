@@ -87,6 +87,14 @@ def _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters, *, max_new,
     return ch.relabel(chart), corner_uv, made
 
 
+#: The most charts :func:`atlas` compacts.  Above, the many small charts of a noisy mesh
+#: gain nothing from the cuts, whose second packing is as long as the first: noisy
+#: rocker-arm (1,537 charts) 62.06 -> 62.2 % covered for 109 s, noisy camelhead (1,775) no
+#: gain for 112 s; at 618 charts (noisy camel_b refined once) 68.2 -> 71.8 % for 15 s, at
+#: 268 (noisy cow) 69.6 -> 74.0 % (session 18, issue 18).
+COMPACT_CHARTS = 1000
+
+
 def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 1024,
           margin_texels: int = 2, cone: float = 88.0, max_aspect: float = 3.5,
           start: str = "conformal", weights: str = "shape_preserving", solver="newton",
@@ -135,7 +143,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       pack tighter than the whole charts (0: no cuts).  At 0.5 (session 9, margin kept at
       the border too): camel_b 80 -> 113 charts, 63.2 -> 72.0 % covered; camelhead 67 ->
       88, 61.6 -> 72.1 %; cow 110 -> 146 (xatlas 107), 67.6 -> 71.7 %; E_sd and max
-      ``s1/s2`` never higher; the atlas takes 1.1-3x the time.
+      ``s1/s2`` never higher; the atlas takes 1.1-3x the time.  Not above
+      :data:`COMPACT_CHARTS` charts (a noisy mesh's), where the cuts gain nothing.
     - ``start``: each chart's start, ``"conformal"`` (the default: its least-squares
       conformal map, :mod:`~jaxparam.atlas.lscm`, or its convex-combination map where that
       inverts a triangle) or ``"convex"`` (the convex-combination map, boundary on a
@@ -266,9 +275,12 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         laid = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
         mark("pack")
         if compact > 0:
-            chart2, corner_uv2, made = _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters,
-                                                max_new=int(compact * (int(chart.max()) + 1)),
-                                                accept=float(compact_accept))
+            k = int(chart.max()) + 1
+            made = False
+            if k <= COMPACT_CHARTS:
+                chart2, corner_uv2, made = _compact(V, F, chart, corner_uv, adj_csr, en, solver,
+                                                    max_iters, max_new=int(compact * k),
+                                                    accept=float(compact_accept))
             if made:
                 laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size), int(margin_texels))
                 if laid2[-1] > laid[-1]:          # the cuts pack tighter: keep them
