@@ -406,3 +406,35 @@ def _fill_in_child():
 
     for_blocks(body, 8, 2)
     raise SystemExit(0 if got.all() else 1)
+
+
+def test_squeezed_share_counts_faces_squeezed_below_their_share_of_the_area():
+    from jaxparam.points.squeeze import squeezed_share
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    assert squeezed_share(F, P, P[:, :2]) == 0.0               # an isometry squeezes nothing
+    U = P[:, :2].copy()
+    U[3] = [0.5 + 1e-5, 0.5 + 1e-5]                            # the second face nearly flat
+    assert squeezed_share(F, P, U) == 0.5
+    assert squeezed_share(F[:0], P, U) == 0.0
+
+
+def test_a_closed_point_set_warns_that_the_map_squeezed_it_and_an_open_one_does_not():
+    # points on a torus (closed: the boundary detector finds a 3-point chain, and the disk map
+    # squeezes 62 % of the triangles; most other samplings of it have no chain at all, which
+    # meshless_map refuses) against the noisy height field (open: nothing squeezed)
+    torus = jp.shapes.torus(32, 16)
+    V, F = np.asarray(torus.vertices), np.asarray(torus.faces)
+    rng = np.random.default_rng(4)
+    f = rng.choice(len(F), 3000)
+    w = rng.dirichlet(np.ones(3), 3000)
+    P = np.einsum("nk,nkd->nd", w, V[F[f]])
+    with pytest.warns(PT.squeeze.SqueezedMapWarning, match="closed surface"):
+        rec = jp.reconstruct_surface(P, verbose=False)
+    assert rec.squeezed > 0.2
+    P, _, _ = scan(3000, noise=0.002, seed=4)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PT.squeeze.SqueezedMapWarning)
+        rec = jp.reconstruct_surface(P, verbose=False)
+    assert rec.squeezed < 0.05

@@ -188,7 +188,8 @@ def cmd_meshless(args) -> int:
     mesh, uv, used = rec.mesh, np.nan_to_num(np.asarray(rec.uv)), int(rec.points_used.size)
     rep = report_dict(mesh, rec.uv, seconds=clock, extra={
         "points": int(P.shape[0]), "points_used": used,
-        "boundary_points": int(rec.boundary.size), "k": args.k, "weights": args.weights})
+        "boundary_points": int(rec.boundary.size), "outliers": int(rec.outliers.size),
+        "squeezed": rec.squeezed, "k": args.k, "weights": args.weights})
     return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
                   line=f"{args.output}: {P.shape[0]} points, {used} used, {mesh.n_faces} faces, "
                        f"{rep['flips']} flipped")

@@ -37,6 +37,7 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = GAP
     else:
         det_gap, det_spacing = knn_gaps(P, k_detect)
     cand = np.flatnonzero(det_gap > gap)
+    n_cand = cand.size
     if cand.size < 3:
         raise PointCloudError(f"meshless_map: found {cand.size} boundary points (largest angular gap "
                               f"> {gap:.2f} rad); the points may sample a closed surface. Pass "
@@ -63,8 +64,11 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = GAP
     big = np.flatnonzero(lab == np.argmax(length))
     cand, W = cand[big], W[big][:, big]
     if cand.size < 3:
-        raise PointCloudError("meshless_map: the boundary candidates do not form a chain; pass "
-                              "boundary=indices, or change k_detect/gap.")
+        raise PointCloudError(f"meshless_map: the {n_cand} "
+                              "boundary candidates (points with an angular gap > "
+                              f"{gap:.2f} rad) form no chain of 3 or more: the points may sample a "
+                              "closed surface, which a meshless map cannot flatten; cut it open, "
+                              "or pass boundary=indices (a closed loop), or change k_detect/gap.")
     loop = cand[_longest_path(W)]
     if loop.size < 3:
         raise PointCloudError("meshless_map: could not order the boundary points into a polygon; "

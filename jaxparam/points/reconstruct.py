@@ -2,6 +2,7 @@
 (survey §8): :func:`reconstruct_surface` and its result, :class:`Reconstruction`."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import jax
@@ -22,6 +23,7 @@ from .graph import (Frames, global_frame, nearest_neighbours, point_graph_in_ord
                     robust_frames, unreachable)
 from .outliers import drop_points, find_outliers
 from .smoothing import SMOOTHING, smooth_points
+from .squeeze import SQUEEZED_SHARE, SqueezedMapWarning, squeeze_message, squeezed_share
 from .meshless import (check_boundary_indices, check_map_options, check_points, map_points,
                        symmetric_solve)
 from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
@@ -50,7 +52,11 @@ class Reconstruction:
       whose every Delaunay face bridges far beyond the spacing (they keep the map's ``uv``);
     - ``seconds``: wall-clock seconds per stage, ``{"neighbours", "boundary" (when
       detected), "weights_and_solve", "delaunay", "flips" (when ``flip_rounds``),
-      "peel_and_topology"}`` ("neighbours" includes the outlier test and the smoothing).
+      "peel_and_topology"}`` ("neighbours" includes the outlier test and the smoothing);
+    - ``squeezed``: the share of the map's Delaunay triangles whose share of the parameter
+      domain is below 1/1000 of their share of the 3D area (:mod:`~jaxparam.points.squeeze`);
+      above 0.2 a :class:`~jaxparam.points.squeeze.SqueezedMapWarning` says the points seem
+      to sample a closed surface (open scans measured 0-0.12, closed ones 0.30-0.99).
 
     Example::
 
@@ -64,6 +70,7 @@ class Reconstruction:
     points_used: np.ndarray
     seconds: dict
     outliers: np.ndarray
+    squeezed: float
 
 
 def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving",
@@ -201,6 +208,9 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     mark("weights_and_solve")
     F = delaunay(U)
     F = F[np.argsort(F.min(axis=1), kind="stable")]     # faces in the points' (Morton) order too
+    squeezed = squeezed_share(F, P, U)
+    if squeezed > SQUEEZED_SHARE:
+        warnings.warn(squeeze_message(squeezed, bnd.size, n_in), SqueezedMapWarning, stacklevel=3)
     mark("delaunay")
     twin = None                        # the faces' half-edge twins, once known (the flips keep them)
     if flip_rounds:
@@ -251,7 +261,8 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     mark.close()
     return Reconstruction(mesh=mesh, uv=uv, boundary=name[bnd],
                           points_used=np.flatnonzero(topology.referenced), seconds=clock.seconds,
-                          outliers=np.sort(np.concatenate([kept[dropped], name[late]])))
+                          outliers=np.sort(np.concatenate([kept[dropped], name[late]])),
+                          squeezed=squeezed)
 
 
 def _nearest_kept(P: np.ndarray, P0: np.ndarray, dropped: np.ndarray, where: np.ndarray,

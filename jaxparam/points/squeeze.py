@@ -1,0 +1,49 @@
+"""Whether the meshless map squeezed most of the surface into nothing: what a disk map does to
+a point set that samples a closed surface, or an open one whose boundary the detector found
+only in part (a short loop around a sharp spot, a slit whose two sides touch).  Numpy on
+concrete arrays."""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["SqueezedMapWarning", "squeezed_share", "SQUEEZE", "SQUEEZED_SHARE", "squeeze_message"]
+
+#: A face is squeezed when its share of the parameter domain's area is below this fraction
+#: of its share of the 3D area.
+SQUEEZE = 1e-3
+#: The share of squeezed faces above which :func:`~jaxparam.reconstruct_surface` warns.
+#: Measured on the first Delaunay faces (session 18, issue 14): open scans of the shared disk
+#: meshes (camelhead, lilium, snail, bump-domain; 8k and 20k points, noise, eightfold density,
+#: outliers) 0-0.12, camelhead.xyz 0.09 (its head, far from the neck's boundary, is
+#: compressed); samples of closed meshes (bunny, cow, decimated-knight, rocker-arm, bumpy, a
+#: torus) and of camel_b (a camel cut open along a slit whose sides touch) 0.30-0.99.
+SQUEEZED_SHARE = 0.2
+
+
+class SqueezedMapWarning(UserWarning):
+    """The meshless map squeezed most faces to nothing: the points are not a disk it can map."""
+
+
+def squeezed_share(F: np.ndarray, P: np.ndarray, U: np.ndarray, squeeze: float = SQUEEZE) -> float:
+    """The share of the faces ``F (m, 3)`` whose parameter area ``U (n, 2)``, as a share of
+    the total, is below ``squeeze`` times their 3D area ``P (n, 3)`` as a share of its total
+    (0 for no faces or no area)."""
+    F = np.asarray(F)
+    if F.shape[0] == 0:
+        return 0.0
+    u1, u2 = U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]]
+    a2 = np.abs(u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0])
+    a3 = np.linalg.norm(np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]), axis=1)
+    if not (a2.sum() > 0 and a3.sum() > 0):
+        return 0.0
+    return float(np.mean(a2 / a2.sum() < squeeze * a3 / a3.sum()))
+
+
+def squeeze_message(share: float, boundary_size: int, n_points: int) -> str:
+    """The warning's text: what was measured, the likely cause and what to do."""
+    return (f"reconstruct_surface: the map squeezed {100 * share:.0f} % of the triangles to less "
+            f"than 1/{1 / SQUEEZE:.0f} of their share of the area (the boundary it used has "
+            f"{boundary_size} of the {n_points} points). The points seem to sample a closed "
+            "surface, or the boundary was found only in part: the UVs are unusable there and "
+            "faces may bridge across the surface. A meshless map needs a disk-like point set: "
+            "cut the surface open, or pass boundary_indices (a closed loop) yourself.")
