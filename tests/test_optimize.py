@@ -106,6 +106,34 @@ def test_implicit_gradient_of_the_optimum():
     assert abs(np.sum(g * d) - float(fd)) <= 1e-4 * max(1.0, abs(float(fd)))
 
 
+def test_a_fixed_boundary_map_does_not_depend_on_the_units(mesh, tmp_path):
+    # the default start's circle is scaled to the surface's area, so the same mesh in units
+    # 1e-3 and 1e3 of its own gives the same map up to that scale and the same energy (with
+    # the unit circle fixed, camelhead's largest aspect went 5.87 / 8.95 / 671 in units
+    # 1e-4 / 1 / 1e3); in the library and in the CLI
+    from jaxparam.cli import main
+    import json
+    V, F = np.asarray(mesh.vertices), mesh.faces
+    res = {s: jp.minimize(jp.TriMesh(V * s, F), "symmetric_dirichlet", verbose=False)
+           for s in (1e-3, 1e3)}
+    assert res[1e-3].energy == pytest.approx(res[1e3].energy, rel=1e-8)
+    np.testing.assert_allclose(res[1e-3].uv * 1e6, res[1e3].uv, rtol=0,
+                               atol=1e-7 * float(np.abs(res[1e3].uv).max()))
+    a3 = float(jnp.sum(jp.geometry.face_areas(V * 1e3, F)))
+    assert float(jnp.sum(jp.geometry.signed_areas(res[1e3].uv, F))) == pytest.approx(a3, rel=1e-9)
+    energies = []
+    for s in (1e-3, 1e3):
+        p = tmp_path / f"m{s:g}.obj"
+        jp.save(p, jp.TriMesh(V * s, F))
+        rep = tmp_path / f"r{s:g}.json"
+        assert main(["flatten", str(p), "-o", str(tmp_path / f"o{s:g}.obj"), "--energy",
+                     "symmetric-dirichlet", "--report", str(rep), "-q"]) == 0
+        r = json.loads(rep.read_text())
+        assert r["start"] == "convex-map"
+        energies.append(r["energy"])
+    assert energies[0] == pytest.approx(energies[1], rel=1e-6)
+
+
 def test_cli_flatten_with_energy(tmp_path, mesh):
     from jaxparam.cli import main
     import json

@@ -161,16 +161,22 @@ def flatten_mesh(mesh, *, weights: str = default_of(convex_map, "weights"),
     if energy:
         from ..energies import get as get_energy
         from ..optimize import minimize     # lazily: the optimize stack costs 0.2 s to import
-        from ..optimize.driver import free_start
+        from ..optimize.driver import free_start, to_surface_area
 
         # jp.minimize's own start where it does not take the convex map (computed above)
-        start = free_start(mesh, free_boundary, get_energy(canonical(energy)).scale_invariant)
+        invariant = get_energy(canonical(energy)).scale_invariant
+        start = free_start(mesh, free_boundary, invariant)
+        kind = "convex-map" if start is None else "conformal-map"
+        if start is None and not invariant:
+            # as jp.minimize's default start: the convex map at the surface's area, so that
+            # a scale-dependent energy's map does not depend on the mesh's units
+            start = to_surface_area(mesh, uv)
         res = minimize(mesh, canonical(energy), init=uv if start is None else start,
                        free_boundary=free_boundary, solver=canonical(solver),
                        max_iters=max_iters, verbose=verbose)
         seconds("minimize")
         uv = np.asarray(res.uv)
-        extra["start"] = "convex-map" if start is None else "conformal-map"
+        extra["start"] = kind
         extra.update({"energy": float(res.energy), "iterations": int(res.iterations),
                       "converged": bool(res.converged), "energy_name": hyphenated(energy),
                       "solver": hyphenated(solver), "free_boundary": bool(free_boundary)})
