@@ -152,10 +152,23 @@ class TriMesh:
         scale = np.mean(np.concatenate([np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)])) ** 2
         zero = np.flatnonzero(area2 <= tol.DEGENERATE_AREA_REL * max(scale, np.finfo(float).tiny))
         if zero.size:
+            used = np.unique(F)
+            distinct = np.unique(V[used], axis=0).shape[0]
+            hint = ""
+            if 2 * zero.size >= F.shape[0] and 2 * distinct <= used.size:
+                # most faces flat because the coordinates themselves collapsed: a file's float32
+                # values far from the origin keep about 7 digits (session 18: a mesh 1e-4 wide
+                # at 5e3, written to PLY as float32, read back as one point)
+                hint = (f" The {used.size} vertices have only {distinct} distinct position"
+                        f"{'s' if distinct != 1 else ''} (vertex {int(used[0])} at "
+                        f"{tuple(float(x) for x in V[used[0]])}): the coordinates lost their "
+                        "precision; a float32 file keeps about 7 digits, so a small mesh far "
+                        "from the origin collapses. Save it in float64 or near the origin.")
             raise DegenerateFaceError(
                 f"TriMesh: faces {first_few(zero)} have zero area (face {int(zero[0])} = "
                 f"{tuple(int(v) for v in F[zero[0]])}); collapse or remove them "
-                "(e.g. trimesh's remove_degenerate_faces), or pass validate=False to keep them.")
+                "(e.g. trimesh's remove_degenerate_faces), or pass validate=False to keep them."
+                + hint)
 
 
 class _StaticIndex:

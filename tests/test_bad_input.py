@@ -186,6 +186,10 @@ def write_off(path, V, F):
      r"2 connected components"),
     ("closed.off", np.asarray(jp.shapes.sphere(0).vertices).tolist(), jp.shapes.sphere(0).faces.tolist(),
      r"closed \(no boundary"),
+    # a small mesh far from the origin, as float32 keeps it: every vertex on one point
+    ("float32.off", (np.float32(5e3) + np.float32(1e-4) * np.asarray(jp.shapes.graph_surface(4).vertices,
+                                                                    np.float32)).astype(float).tolist(),
+     jp.shapes.graph_surface(4).faces.tolist(), r"zero area.*only 1 distinct position.*float32"),
 ])
 def test_cli_exit_3_names_the_problem(tmp_path, capsys, name, V, F, match):
     p = tmp_path / name
