@@ -17,7 +17,8 @@ import numpy as np
 from . import tol
 
 __all__ = ["safe_norm", "corner_geometry",  "weights_from_angles", "shape_preserving_weights",
-           "frame_coordinates", "face_quantities", "circle", "signed_areas", "face_areas"]
+           "frame_coordinates", "face_quantities", "circle", "signed_areas", "face_areas",
+           "vertex_normals"]
 
 
 def safe_norm(x, axis=-1):
@@ -113,6 +114,18 @@ def face_areas(V, F) -> np.ndarray:
         return np.abs(signed_areas(V, F))
     P = V[F]
     return 0.5 * safe_norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]))
+
+
+def vertex_normals(V, F, N=None) -> np.ndarray:
+    """``(n, 3)`` unit vertex normals of ``(V (n, 3), F (m, 3))``: the area-weighted sum of
+    the face normals around each vertex (0 for unreferenced vertices); ``N (m, 3)``: the
+    faces' unnormalized normals ``(v1 - v0) x (v2 - v0)``, when already at hand."""
+    V, F = np.asarray(V), np.asarray(F)
+    if N is None:
+        N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    vn = np.stack([np.bincount(F.ravel(), weights=np.repeat(N[:, d], 3), minlength=V.shape[0])
+                   for d in range(3)], 1)
+    return vn / np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
 
 
 def frame_coordinates(V, F):

@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import topology as topo
 from ..errors import SolverError
-from ..host import face_areas
+from ..host import face_areas, vertex_normals
 from ..progress import progress
 from .decimate import plane_quadrics
 
@@ -391,11 +391,7 @@ def noise_dominates(V: np.ndarray, F: np.ndarray) -> bool:
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
     L, E = _umbrella(V, F)
-    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    vn = np.stack([np.bincount(F.ravel(), np.repeat(N[:, d], 3), minlength=V.shape[0])
-                   for d in range(3)], 1)
-    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
-    s = np.einsum("ij,ij->i", L, vn)
+    s = np.einsum("ij,ij->i", L, vertex_normals(V, F))
     power = float(np.mean(s * s))
     return power > 0 and float(np.mean(s[E[:, 0]] * s[E[:, 1]])) < 0.0
 

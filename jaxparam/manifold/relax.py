@@ -35,6 +35,7 @@ import numpy as np
 
 from .. import topology as topo
 from ..distance import point_triangle_distance
+from ..host import vertex_normals
 from .overlay import base_charts, unfolding
 
 __all__ = ["BaseDomain", "GridLift", "relax_samples", "ITERATIONS", "STEP", "CURVATURE_WEIGHT", "FINEST_ITERATIONS",
@@ -310,9 +311,7 @@ def sharpest_vertices(V: np.ndarray, F: np.ndarray, k: int = ESTIMATE_POINTS) ->
     turn furthest from the vertex normal (tips and creases first): where a remesh cuts the
     surface, the input points far from it are there."""
     N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    vn = np.stack([np.bincount(F.ravel(), weights=np.repeat(N[:, d], 3), minlength=V.shape[0])
-                   for d in range(3)], 1)
-    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+    vn = vertex_normals(V, F, N)
     nf = N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
     turn = np.zeros(V.shape[0])
     for c in range(3):

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..host import vertex_normals  # noqa: F401 - part of this module's interface
+
 __all__ = ["Raster", "camera", "vertex_normals", "rasterize", "shading", "wire", "downsample"]
 
 #: Candidate (face, pixel) pairs examined at once.
@@ -71,16 +73,6 @@ def camera(elev: float, azim: float) -> np.ndarray:
     right = np.array([-np.sin(a), np.cos(a), 0.0])
     up = np.cross(toward, right)
     return np.stack([right, up, toward])
-
-
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """``(n, 3)`` unit vertex normals: the area-weighted sum of the face normals around
-    each vertex (0 for unreferenced vertices)."""
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N = np.zeros_like(V)
-    for c in range(3):
-        np.add.at(N, F[:, c], fn)
-    return N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
 
 
 def _frame(S: np.ndarray, pixels: int, margin: float):

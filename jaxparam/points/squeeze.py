@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..host import face_areas
+
 __all__ = ["SqueezedMapWarning", "squeezed_share", "SQUEEZE", "SQUEEZED_SHARE", "squeeze_message"]
 
 #: A face is squeezed when its share of the parameter domain's area is below this fraction
@@ -35,9 +37,7 @@ def squeezed_share(F: np.ndarray, P: np.ndarray, U: np.ndarray, squeeze: float =
     if F.shape[0] == 0:
         return 0.0
     F = F[::-(-F.shape[0] // most)]
-    u1, u2 = U[F[:, 1]] - U[F[:, 0]], U[F[:, 2]] - U[F[:, 0]]
-    a2 = np.abs(u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0])
-    a3 = np.linalg.norm(np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]), axis=1)
+    a2, a3 = face_areas(U, F), face_areas(P, F)
     if not (a2.sum() > 0 and a3.sum() > 0):
         return 0.0
     return float(np.mean(a2 / a2.sum() < squeeze * a3 / a3.sum()))
