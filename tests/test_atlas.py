@@ -208,6 +208,27 @@ def test_packing_keeps_margin_and_orientation():
     assert area * P.scale ** 2 >= 0.6
 
 
+def test_packing_fits_needle_charts_longer_than_their_area_allows():
+    # 40 needles of aspect 2000 (the charts of a mesh scaled 1000:1:0.01; the held-out sweep
+    # of session 19 failed with "did not fit after 5 packings"): the first scale is capped by
+    # the longest chart, so they pack, apart, inside the border
+    k, L, W = 40, 100.0, 0.05
+    rect = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    uv = np.concatenate([rect * [L * (1 - 0.01 * c), W] for c in range(k)])
+    uf = np.concatenate([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * c for c in range(k)])
+    chart, uvc = np.repeat(np.arange(k), 2), np.repeat(np.arange(k), 4)
+    area = float(sum(L * (1 - 0.01 * c) * W for c in range(k)))
+    P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=256, margin_texels=2)
+    out = P.apply(uv, uvc)
+    assert out.min() >= 2 / 256 - 1e-12 and out.max() <= 1 - 2 / 256 + 1e-12
+    lo = np.array([out[uvc == c].min(0) for c in range(k)])
+    hi = np.array([out[uvc == c].max(0) for c in range(k)])
+    gap = np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None]).max(-1)
+    np.fill_diagonal(gap, np.inf)
+    assert gap.min() >= 2 / 256 - 1e-12
+    assert P.scale * L > 0.5          # the longest needle spans more than half the square
+
+
 def _u_and_blobs():
     """A 40-cell U-shaped mask, then 14 elliptic blobs of radius 2.5-9 cells (seeded)."""
     U = np.ones((40, 40), bool)

@@ -550,7 +550,13 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
                           f"{texture_size}-texel texture; lower margin_texels or raise texture_size.",
                           stage="pack")
     cap = int(np.ceil(1.3 * inner))
-    s = inner * np.sqrt(fill / area3d)           # cells per 3D unit
+    # cells per 3D unit: the share `fill` of the square by area, but never so large that the
+    # longest chart (the longer side of its rectangle) would not fit in the square (needle
+    # charts of a very anisotropic mesh: the area says nothing about their length)
+    longest = float(local.max()) if local.size else 0.0
+    s = inner * np.sqrt(fill / area3d)
+    if longest > 0:
+        s = min(s, 0.98 * inner / longest)
     best = None
     attempt = 0
     while attempt < max_attempts:
