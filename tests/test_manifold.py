@@ -131,6 +131,28 @@ def test_cow_remesh_lies_on_the_surface_and_cli_writes_it(tmp_path):
     assert main(["compress", str(out), "-o", str(tmp_path / "small.obj"), "--keep", "0.05"]) == 0
 
 
+def test_cli_manifold_remeshes_every_component(tmp_path):
+    # several closed components: one base domain each (the total shared by faces), written as
+    # one mesh, largest first (the held-out sweep of session 19: the command refused two cows)
+    s = jp.shapes.sphere(1)
+    V = np.concatenate([np.asarray(s.vertices), np.asarray(s.vertices) * 0.5 + 3])
+    src, out, rep, pic = tmp_path / "two.obj", tmp_path / "semi.obj", tmp_path / "r.json", tmp_path / "p.png"
+    jp.save(src, jp.TriMesh(V, np.concatenate([s.faces, s.faces + s.n_vertices])))
+    assert main(["manifold", str(src), "-o", str(out), "--base-faces", "40", "--levels", "1",
+                 "--report", str(rep), "--plot", str(pic)]) == 0
+    r = json.loads(rep.read_text())
+    assert [c["base_faces"] for c in r["components"]] == [20, 20] and r["genus"] == [0, 0]
+    assert [c["first_input_vertex"] for c in r["components"]] == [0, s.n_vertices]
+    semi = jp.load(out)
+    t = semi.topology
+    assert t.n_components == 2 and t.is_closed and semi.n_faces == r["faces"] == 2 * 20 * 4
+    X = np.asarray(semi.vertices)
+    half = semi.n_vertices // 2
+    assert np.abs(np.linalg.norm(X[:half], axis=1) - 1).max() < 0.2       # the unit sphere first
+    assert np.abs(np.linalg.norm(X[half:] - 3, axis=1) - 0.5).max() < 0.1
+    assert pic.stat().st_size > 0
+
+
 def test_cli_manifold_on_a_generated_torus(tmp_path):
     src, out, rep = tmp_path / "torus.obj", tmp_path / "semi.obj", tmp_path / "r.json"
     jp.save(src, jp.shapes.torus(40, 20))

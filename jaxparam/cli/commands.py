@@ -17,6 +17,7 @@ import numpy as np
 from ..clock import StageClock
 from ..errors import MeshFileError, PointCloudError
 from ..io import load, load_points, save
+from ..mesh import TriMesh
 from ..options import canonical
 from .arguments import flatten_options
 from .pipeline import EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
@@ -273,6 +274,8 @@ def cmd_manifold(args) -> int:
     from ..manifold.report import fidelity
 
     mesh, clock = begin(args.mesh, compile_cache=False)
+    if mesh.topology.n_components > 1:
+        return _manifold_components(args, mesh, clock)
     base, param = manifold_map(mesh, args.base_faces, method=canonical(args.method))
     clock("parameterize")
     semi = param.remesh(args.levels)
@@ -290,3 +293,44 @@ def cmd_manifold(args) -> int:
                   line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, genus "
                        f"{t.genus}, subdivision connectivity of order {args.levels} over "
                        f"{base.n_faces} base faces")
+
+
+def _manifold_components(args, mesh, clock) -> int:
+    """``jaxparam manifold`` on a mesh of several closed components: each over a base domain
+    of its own (``--base-faces`` is the total, shared by the components' faces;
+    :func:`jaxparam.manifold.manifold_map_each`), remeshed at ``--levels``, and written as
+    one mesh, the components' remeshes one after the other, largest first."""
+    from ..manifold import manifold_map_each
+    from ..manifold.report import fidelity
+
+    parts = manifold_map_each(mesh, args.base_faces, method=canonical(args.method))
+    clock("parameterize")
+    semis = [part.param.remesh(args.levels) for part in parts]
+    clock("remesh")
+    starts = np.cumsum([0] + [s.mesh.n_vertices for s in semis])
+    out = TriMesh(np.concatenate([np.asarray(s.mesh.vertices, np.float64) for s in semis]),
+                  np.concatenate([np.asarray(s.mesh.faces) + k for s, k in zip(semis, starts)]),
+                  name=f"{mesh.name or 'mesh'} remeshed")
+    rows = []
+    for part, semi in zip(parts, semis):
+        row = {"input_vertices": int(part.vertices.size), "input_faces": int(part.faces.size),
+               "first_input_vertex": int(part.vertices[0]), "vertices": semi.mesh.n_vertices,
+               "faces": semi.mesh.n_faces, "genus": int(semi.mesh.topology.genus),
+               "base_vertices": part.base.n_vertices, "base_faces": part.base.n_faces,
+               "work_vertices": part.param.mesh.n_vertices}
+        if getattr(args, "fidelity", False):
+            sub = TriMesh(np.asarray(mesh.vertices)[part.vertices],
+                          np.searchsorted(part.vertices, np.asarray(mesh.faces)[part.faces]))
+            row["fidelity"] = fidelity(part.param, semi, sub).as_dict()
+        rows.append(row)
+    if getattr(args, "fidelity", False):
+        clock("fidelity")
+    rep = {"vertices": out.n_vertices, "faces": out.n_faces, "components": rows,
+           "genus": [r["genus"] for r in rows], "base_faces": sum(r["base_faces"] for r in rows),
+           "levels": args.levels, "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
+           "seconds": clock}
+    return finish(args, out, None, report=rep, plot=drawing("plot_remesh", semis),
+                  line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, "
+                       f"{len(parts)} components of genus {', '.join(str(r['genus']) for r in rows)}, "
+                       f"subdivision connectivity of order {args.levels} over "
+                       f"{', '.join(str(r['base_faces']) for r in rows)} base faces")

@@ -106,24 +106,32 @@ def plot_remesh(semi, path=None, *, title: str | None = None, elev: float = 30,
     refined base domain ``T^j``; left out for closed remeshes, which have none).
 
     **Arguments:** ``semi`` a :class:`jaxparam.remesh.Remesh` (from :func:`jaxparam.remesh`
-    or ``ManifoldParameterization.remesh``); ``path``, ``elev``, ``azim``, ``dpi``,
+    or ``ManifoldParameterization.remesh``), or a sequence of closed ones (the components of
+    a mesh, :func:`jaxparam.manifold.manifold_map_each`: drawn together, one surface panel);
+    ``path``, ``elev``, ``azim``, ``dpi``,
     ``size`` as for :func:`plot_checkerboard`.  **Returns:** the Figure.
     """
     from matplotlib.collections import PolyCollection
 
-    F = np.asarray(semi.mesh.faces)
-    base_of = np.arange(F.shape[0]) // (4 ** semi.hierarchy.levels)   # children follow their parent
+    parts = tuple(semi) if isinstance(semi, (list, tuple)) else (semi,)
+    starts = np.cumsum([0] + [p.mesh.n_vertices for p in parts])
+    V = np.concatenate([np.asarray(p.mesh.vertices, np.float64) for p in parts])
+    F = np.concatenate([np.asarray(p.mesh.faces) + s0 for p, s0 in zip(parts, starts)])
+    # children follow their parent: a face's base triangle, numbered on across the parts
+    base_of = np.concatenate([np.arange(p.mesh.n_faces) // (4 ** p.hierarchy.levels) for p in parts])
+    base_of += np.repeat(np.cumsum([0] + [p.mesh.n_faces // 4 ** p.hierarchy.levels for p in parts])[:-1],
+                         [p.mesh.n_faces for p in parts])
     face_rgb = _PALETTE[base_of % len(_PALETTE)]
+    semi = parts[0]
 
     def colors(r):
         return face_rgb[np.where(r.face >= 0, r.face, 0)]
 
     edge_px = 0.6 if F.shape[0] < 20000 else 0.0
-    rgba, _ = _render(semi.mesh.vertices, F, colors, elev=elev, azim=azim,
-                      pixels=int(size * dpi), edges=edge_px)
-    U = None if semi.uv is None else np.asarray(semi.uv, np.float64)
+    rgba, _ = _render(V, F, colors, elev=elev, azim=azim, pixels=int(size * dpi), edges=edge_px)
+    U = None if semi.uv is None or len(parts) > 1 else np.asarray(semi.uv, np.float64)
     t = title or (f"remesh: {F.shape[0]} faces, subdivision connectivity of order "
-                  f"{semi.hierarchy.levels}")
+                  f"{semi.hierarchy.levels}" + (f", {len(parts)} components" if len(parts) > 1 else ""))
     h, w = rgba.shape[:2]
     fig, ax = image_figure(rgba, t, dpi=dpi, extra_width=0.0 if U is None else h / dpi)
     if U is None:                       # a closed remesh (jaxparam.manifold): no plane picture
