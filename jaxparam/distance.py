@@ -7,8 +7,8 @@ Hausdorff and RMS distances both ways, relative to the bounding-box diagonal.
   (Ericson, *Real-Time Collision Detection*, §5.1.5), vectorized over (point, triangle) pairs;
 - :func:`point_triangle_distance` — for each point, the exact distance to a mesh, its nearest
   face and the closest point; candidates come from a k-d tree of the face centroids and are
-  proved complete: a point whose best distance exceeds its k-th candidate's lower bound is
-  queried again with an exact radius search;
+  proved complete: a point whose best distance exceeds a lower bound for the faces not tried
+  searches an AABB tree (:class:`jaxparam.aabb_tree.AABBTree`) for every face box within it;
 - :func:`sample_surface` — area-weighted random points on a mesh (fixed seed);
 - :func:`surface_distance` — :class:`SurfaceDistance`, both ways.
 
@@ -19,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .aabb_tree import AABBTree
 
 __all__ = ["closest_points_on_triangles", "point_triangle_distance", "sample_surface", "face_grid_points", "grid_barycentric",
            "surface_distance", "SurfaceDistance", "bounding_diagonal"]
@@ -136,7 +138,6 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
     d_out = np.empty(len(P))
     f_out = np.empty(len(P), np.int64)
     q_out = np.empty((len(P), 3))
-    kth = np.empty(len(P))
     for lo in range(0, len(P), _CHUNK):                        # chunks bound the memory only
         Pc = P[lo:lo + _CHUNK]
         cdist, cidx = tree.query(Pc, k=k)
@@ -150,34 +151,37 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
         d_out[lo:lo + len(Pc)] = d[rows, best]
         f_out[lo:lo + len(Pc)] = cidx[rows, best]
         q_out[lo:lo + len(Pc)] = q.reshape(len(Pc), k, 3)[rows, best]
-        kth[lo:lo + len(Pc)] = cdist[:, -1]
 
     # completeness: faces are grouped by their reach (centroid to farthest corner) in powers of
     # two; a face of group g not among the k candidates is at least (its centroid distance -
-    # R_g) away, where R_g is the group's largest reach.  Per group, points whose best distance
-    # exceeds that bound for the group's nearest centroid are re-queried within d + R_g, so a
-    # few long faces never widen the search around the many short ones.
+    # R_g) away, where R_g is the group's largest reach.  A point whose best distance exceeds
+    # that bound for some group's nearest centroid is unsure: its best is then proved (or
+    # bettered) by the faces whose bounding boxes come within it, found in an AABB tree (a
+    # ball of radius R_g would hold whole neighbourhoods of slivers).
     if k < m:
         ratio = reach / max(float(np.median(reach)), 1e-300)
         group = np.clip(np.ceil(np.log2(np.maximum(ratio, 1.0))), 0, 30).astype(np.int64)
+        unsure = np.zeros(len(P), bool)
         for g in np.unique(group):
             members = np.flatnonzero(group == g)
-            r_g = float(reach[members].max())
-            sub = cKDTree(centroid[members])
-            near, _ = sub.query(P, k=1)
-            unsure = np.flatnonzero(d_out > near - r_g)
-            if not len(unsure):
-                continue
-            lists = sub.query_ball_point(P[unsure], d_out[unsure] + r_g)
-            counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
-            if not counts.sum():
-                continue
-            rows = np.repeat(unsure, counts)
-            cand = members[np.concatenate([np.asarray(x, np.int64) for x in lists])]
-            r, d, face, q = _best_of(P, V, F, rows, cand)
-            better = d < d_out[r]
-            r, d, face, q = r[better], d[better], face[better], q[better]
-            d_out[r], f_out[r], q_out[r] = d, face, q
+            near, _ = cKDTree(centroid[members]).query(P, k=1)
+            unsure |= d_out > near - float(reach[members].max())
+        unsure = np.flatnonzero(unsure)
+        if unsure.size:
+            tree = AABBTree(V, F)
+
+            def improve(rows, cand):
+                r, d, face, q = _best_of(P, V, F, rows, cand)
+                better = d < d_out[r]
+                d_out[r[better]], f_out[r[better]], q_out[r[better]] = d[better], face[better], q[better]
+
+            for lo in range(0, unsure.size, _CHUNK // 8):
+                idx = unsure[lo:lo + _CHUNK // 8]
+                rows, cand = tree.descend(P[idx])          # a first guess tightens the bound
+                improve(idx[rows], cand)
+                rows, cand = tree.within(P[idx], d_out[idx])
+                if rows.size:
+                    improve(idx[rows], cand)
     return d_out, f_out, q_out
 
 
