@@ -75,19 +75,6 @@ class AABBTree:
         first = np.repeat(b[leaf] - np.cumsum(count) + count, count)
         return r, first + np.arange(r.size)
 
-    def descend(self, P) -> tuple[np.ndarray, np.ndarray]:
-        """``(rows, faces)``: for each point of ``P (p, 3)``, the faces of the leaf reached by
-        always entering the child box nearer to it (a cheap first guess, not the nearest)."""
-        P = np.asarray(P, np.float64)
-        node = np.zeros(len(P), np.int64)
-        for level in range(1, self.depth + 1):
-            a, b = 2 * node, 2 * node + 1
-            right = _box_distance2(P, self.lo[level][b], self.hi[level][b]) < \
-                _box_distance2(P, self.lo[level][a], self.hi[level][a])
-            node = np.where(right, b, a)
-        rows, pos = self._leaf_faces(np.arange(len(P)), node)
-        return rows, self.order[pos]
-
     def within(self, P, bound, *, chunk: int = 4096):
         """Every ``(row, face)`` pair whose face box lies within ``bound (p,)`` of point
         ``P[row]`` (``P (p, 3)``): a superset of the faces nearer than ``bound``, since a

@@ -177,8 +177,6 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
 
             for lo in range(0, unsure.size, _CHUNK // 8):
                 idx = unsure[lo:lo + _CHUNK // 8]
-                rows, cand = tree.descend(P[idx])          # a first guess tightens the bound
-                improve(idx[rows], cand)
                 rows, cand = tree.within(P[idx], d_out[idx])
                 if rows.size:
                     improve(idx[rows], cand)
