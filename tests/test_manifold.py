@@ -151,6 +151,14 @@ def test_cli_manifold_remeshes_every_component(tmp_path):
     assert np.abs(np.linalg.norm(X[:half], axis=1) - 1).max() < 0.2       # the unit sphere first
     assert np.abs(np.linalg.norm(X[half:] - 3, axis=1) - 0.5).max() < 0.1
     assert pic.stat().st_size > 0
+    # compress reads it back: each component on its own numbering, the same share kept of each
+    small, crep = tmp_path / "small.obj", tmp_path / "c.json"
+    assert main(["compress", str(out), "-o", str(small), "--keep", "0.5", "--report", str(crep)]) == 0
+    c = json.loads(crep.read_text())
+    one = jp.wavelets.compress(jp.TriMesh(X[:half], np.asarray(semi.faces)[: semi.n_faces // 2]), 0.5)
+    assert c["components"] == 2 and c["levels"] == [1, 1] and c["coefficients_kept"] == 2 * one.kept > 0
+    np.testing.assert_allclose(np.asarray(jp.load(small).vertices)[:half], np.asarray(one.mesh.vertices),
+                               atol=1e-12)
 
 
 def test_cli_manifold_on_a_generated_torus(tmp_path):
