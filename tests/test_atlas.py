@@ -13,6 +13,7 @@ import pytest
 
 import jaxparam as jp
 from jaxparam import topology as topo
+from jaxparam.errors import SolverError
 from jaxparam.atlas import atlas, atlas_uv, chart_pieces, pack
 from jaxparam.atlas import charts as ch
 from conftest import data_path
@@ -227,6 +228,29 @@ def test_packing_fits_needle_charts_longer_than_their_area_allows():
     np.fill_diagonal(gap, np.inf)
     assert gap.min() >= 2 / 256 - 1e-12
     assert P.scale * L > 0.5          # the longest needle spans more than half the square
+
+
+def test_packing_with_wide_margins_fits_or_says_at_once_that_it_cannot():
+    # 30 squares with 12-texel margins in a 128-texel texture: the margins take most of the
+    # square, so the area's first scale failed five packings ("did not fit"); the first scale
+    # now counts the margins (the option sweep of session 19: cow with 64-texel margins)
+    k = 30
+    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    uv = np.concatenate([sq * (0.5 + 0.02 * c) for c in range(k)])
+    uf = np.concatenate([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * c for c in range(k)])
+    chart, uvc = np.repeat(np.arange(k), 2), np.repeat(np.arange(k), 4)
+    area = float(np.sum([(0.5 + 0.02 * c) ** 2 for c in range(k)]))
+    P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=128, margin_texels=12)
+    out = P.apply(uv, uvc)
+    assert out.min() >= 12 / 128 - 1e-12 and out.max() <= 1 - 12 / 128 + 1e-12
+    lo = np.array([out[uvc == c].min(0) for c in range(k)])
+    hi = np.array([out[uvc == c].max(0) for c in range(k)])
+    gap = np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None]).max(-1)
+    np.fill_diagonal(gap, np.inf)
+    assert gap.min() >= 12 / 128 - 1e-12
+    # 30 charts of one cell and two of margin cannot fit 12 x 12 cells: refused before packing
+    with pytest.raises(SolverError, match=r"30 charts, each at least one cell.*raise texture_size \(to at least"):
+        pack.pack_charts(uv, uf, chart, uvc, area, texture_size=16, margin_texels=2)
 
 
 def _u_and_blobs():

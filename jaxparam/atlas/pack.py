@@ -20,7 +20,10 @@ least ``margin_texels`` texels from the square's border (for bilinear filtering 
 mip-maps at the texture's edge).  The scale (UV units per 3D unit, one for all charts, so
 texel density is uniform) starts from the charts' area and is corrected from each
 packing's side, so that ``S + 2 m`` comes close to (and not above) the raster's size: a
-few packings in all.  A short bisection on the scale then packs into the fixed square of
+few packings in all; it starts no larger than the longest chart allows, and where wide
+margins would take much of the square, from the scale at which the charts and their margins
+take the share ``fill`` (a texture too small for one cell per chart and its margins is refused
+before any packing).  A short bisection on the scale then packs into the fixed square of
 the raster's size less the frame (:func:`fill_square`: largest first, each chart at its
 lowest, then leftmost free position over its four turns) at scales up to 12 % more area,
 and keeps the largest scale that fits: bottom-left filling of a fixed square nests the
@@ -557,6 +560,26 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     s = inner * np.sqrt(fill / area3d)
     if longest > 0:
         s = min(s, 0.98 * inner / longest)
+    # Wide margins: each chart takes about (w s + m)(h s + m) cells with its margin, so the
+    # charts alone cannot have the share `fill` of the square (110 charts of cow with 64-texel
+    # margins failed 19 packings, 10 s each, before one fit).  Where that bound is well below
+    # the area's scale, start from it: area3d s^2 + m P s + k m^2 = fill inner^2, P the
+    # charts' rectangles' half-perimeters (3D units).
+    if k * (1 + m) ** 2 > inner * inner:
+        raise SolverError(f"pack_charts: {k} charts, each at least one cell of {f} texels with a "
+                          f"margin of {margin_texels} texels, need more than the {texture_size}-texel "
+                          f"square holds; lower margin_texels or raise texture_size (to at least "
+                          f"{int(np.ceil(np.sqrt(k) * (1 + m) * f + 2 * m * f))}).", stage="pack")
+    if m > 0:
+        ext = np.maximum.reduceat(local[order], bounds[:-1]) if local.size else np.zeros((k, 2))
+        half_perimeter = float(ext.sum())
+        c = k * m * m - fill * inner * inner
+        if c >= 0:                       # the margins alone would fill that share: the square
+            c = k * m * m - inner * inner
+        b = m * half_perimeter
+        s_margin = 2 * -c / (b + np.sqrt(b * b - 4 * area3d * c))         # the positive root
+        if s_margin < 0.8 * s:
+            s = s_margin
     best = None
     attempt = 0
     while attempt < max_attempts:
