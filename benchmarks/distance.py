@@ -27,20 +27,6 @@ import numpy as np
 DATA = Path(os.environ.get("JAXPARAM_DATA", Path(__file__).resolve().parent.parent.parent / "shared" / "data"))
 
 
-def lathe(around: int, along: int):
-    """A surface of revolution (radius 1 + 0.3 sin z, height 10), ``along`` rings of ``around``
-    quads, two triangles each."""
-    t = np.linspace(0, 2 * np.pi, around, endpoint=False)
-    z = np.linspace(0, 10, along + 1)
-    r = 1 + 0.3 * np.sin(z)
-    V = np.stack([np.outer(r, np.cos(t)), np.outer(r, np.sin(t)), np.repeat(z[:, None], around, 1)], -1)
-    i = np.arange(around)
-    a = (np.arange(along)[:, None] * around + i).ravel()
-    b = (np.arange(along)[:, None] * around + (i + 1) % around).ravel()
-    F = np.concatenate([np.stack([a, b, b + around], 1), np.stack([a, b + around, a + around], 1)])
-    return V.reshape(-1, 3), F
-
-
 def meshes():
     import jaxparam as jp
 
@@ -50,8 +36,9 @@ def meshes():
         if path.exists():
             m = jp.load(path)
             out[name.split(".")[0]] = (np.asarray(m.vertices), np.asarray(m.faces))
-    out["lathe 2000x5"] = lathe(2000, 5)
-    out["lathe 5000x2"] = lathe(5000, 2)
+    for around, along in ((2000, 5), (5000, 2)):
+        m = jp.shapes.revolution(around, along)
+        out[f"lathe {around}x{along}"] = (np.asarray(m.vertices), np.asarray(m.faces))
     if "camelhead" in out:
         V, F = out["camelhead"]
         out["camelhead 1000:1:0.01"] = (V * [1e3, 1, 1e-2], F)

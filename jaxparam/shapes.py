@@ -11,7 +11,7 @@ from .mesh import TriMesh, grid_faces
 from .subdivision import midpoint_refine
 
 __all__ = ["grid_faces", "plane_grid", "graph_surface", "cylinder_patch", "example5",
-           "disk", "sphere", "torus", "refine"]
+           "disk", "sphere", "torus", "revolution", "refine"]
 
 
 def _grid_uv(nu: int, nv: int, jitter: float = 0.0, seed: int = 0) -> np.ndarray:
@@ -111,6 +111,22 @@ def torus(nu: int = 24, nv: int = 12, *, R: float = 1.0, r: float = 0.35) -> Tri
     d = (i * nv + (j + 1) % nv).ravel()
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return TriMesh(V, F, name="torus")
+
+
+def revolution(around: int = 64, along: int = 8, *, height: float = 10.0) -> TriMesh:
+    """An open tube of revolution (radius ``1 + 0.3 sin z``, ``0 <= z <= height``) cut into
+    ``along`` rings of ``around`` quads, two triangles each: the slivers of a CAD export when
+    ``around`` is large and ``along`` small (aspect about ``height around / (2 pi along)``).
+    Two boundary loops (the ends); vertices ring by ring."""
+    t = np.linspace(0, 2 * np.pi, around, endpoint=False)
+    z = np.linspace(0, height, along + 1)
+    r = 1 + 0.3 * np.sin(z)
+    V = np.stack([np.outer(r, np.cos(t)), np.outer(r, np.sin(t)), np.repeat(z[:, None], around, 1)], -1)
+    i = np.arange(around)
+    a = (np.arange(along)[:, None] * around + i).ravel()
+    b = (np.arange(along)[:, None] * around + (i + 1) % around).ravel()
+    F = np.concatenate([np.stack([a, b, b + around], 1), np.stack([a, b + around, a + around], 1)])
+    return TriMesh(V.reshape(-1, 3), F, name="revolution")
 
 
 def _split(V: np.ndarray, F: np.ndarray):

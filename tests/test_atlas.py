@@ -188,24 +188,32 @@ def test_min_square_rotation_is_proper_and_gives_the_smallest_square():
         assert side <= np.ptp(P @ np.array([[c, -s], [s, c]]).T, axis=0).max() + 1e-9
 
 
-def test_packing_keeps_margin_and_orientation():
-    # many small squares: placed without overlap, margin kept, rotation proper
-    k = 30
+def _squares(k: int):
+    """``k`` unit squares scaled by 0.5 + 0.02 c as charts: ``(uv, uv_faces, chart, uv_chart, area)``."""
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
     uv = np.concatenate([sq * (0.5 + 0.02 * c) for c in range(k)])
     uf = np.concatenate([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * c for c in range(k)])
-    chart = np.repeat(np.arange(k), 2)
-    uvc = np.repeat(np.arange(k), 4)
     area = float(np.sum([(0.5 + 0.02 * c) ** 2 for c in range(k)]))
-    P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=128, margin_texels=2)
-    out = P.apply(uv, uvc)
-    assert np.all(np.linalg.det(P.rotation) > 0.999)
-    assert out.min() >= 2 / 128 - 1e-12 and out.max() <= 1 - 2 / 128 + 1e-12   # border margin
+    return uv, uf, np.repeat(np.arange(k), 2), np.repeat(np.arange(k), 4), area
+
+
+def _assert_apart(out, uvc, margin: float):
+    """The packed charts' boxes keep ``margin`` from the border and from each other."""
+    assert out.min() >= margin - 1e-12 and out.max() <= 1 - margin + 1e-12
+    k = int(uvc.max()) + 1
     lo = np.array([out[uvc == c].min(0) for c in range(k)])
     hi = np.array([out[uvc == c].max(0) for c in range(k)])
     gap = np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None]).max(-1)
     np.fill_diagonal(gap, np.inf)
-    assert gap.min() >= 2 / 128 - 1e-12
+    assert gap.min() >= margin - 1e-12
+
+
+def test_packing_keeps_margin_and_orientation():
+    # many small squares: placed without overlap, margin kept, rotation proper
+    uv, uf, chart, uvc, area = _squares(30)
+    P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=128, margin_texels=2)
+    assert np.all(np.linalg.det(P.rotation) > 0.999)
+    _assert_apart(P.apply(uv, uvc), uvc, 2 / 128)
     assert area * P.scale ** 2 >= 0.6
 
 
@@ -220,13 +228,7 @@ def test_packing_fits_needle_charts_longer_than_their_area_allows():
     chart, uvc = np.repeat(np.arange(k), 2), np.repeat(np.arange(k), 4)
     area = float(sum(L * (1 - 0.01 * c) * W for c in range(k)))
     P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=256, margin_texels=2)
-    out = P.apply(uv, uvc)
-    assert out.min() >= 2 / 256 - 1e-12 and out.max() <= 1 - 2 / 256 + 1e-12
-    lo = np.array([out[uvc == c].min(0) for c in range(k)])
-    hi = np.array([out[uvc == c].max(0) for c in range(k)])
-    gap = np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None]).max(-1)
-    np.fill_diagonal(gap, np.inf)
-    assert gap.min() >= 2 / 256 - 1e-12
+    _assert_apart(P.apply(uv, uvc), uvc, 2 / 256)
     assert P.scale * L > 0.5          # the longest needle spans more than half the square
 
 
@@ -234,20 +236,9 @@ def test_packing_with_wide_margins_fits_or_says_at_once_that_it_cannot():
     # 30 squares with 12-texel margins in a 128-texel texture: the margins take most of the
     # square, so the area's first scale failed five packings ("did not fit"); the first scale
     # now counts the margins (the option sweep of session 19: cow with 64-texel margins)
-    k = 30
-    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
-    uv = np.concatenate([sq * (0.5 + 0.02 * c) for c in range(k)])
-    uf = np.concatenate([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * c for c in range(k)])
-    chart, uvc = np.repeat(np.arange(k), 2), np.repeat(np.arange(k), 4)
-    area = float(np.sum([(0.5 + 0.02 * c) ** 2 for c in range(k)]))
+    uv, uf, chart, uvc, area = _squares(30)
     P = pack.pack_charts(uv, uf, chart, uvc, area, texture_size=128, margin_texels=12)
-    out = P.apply(uv, uvc)
-    assert out.min() >= 12 / 128 - 1e-12 and out.max() <= 1 - 12 / 128 + 1e-12
-    lo = np.array([out[uvc == c].min(0) for c in range(k)])
-    hi = np.array([out[uvc == c].max(0) for c in range(k)])
-    gap = np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None]).max(-1)
-    np.fill_diagonal(gap, np.inf)
-    assert gap.min() >= 12 / 128 - 1e-12
+    _assert_apart(P.apply(uv, uvc), uvc, 12 / 128)
     # 30 charts of one cell and two of margin cannot fit 12 x 12 cells: refused before packing
     with pytest.raises(SolverError, match=r"30 charts, each at least one cell.*raise texture_size \(to at least"):
         pack.pack_charts(uv, uf, chart, uvc, area, texture_size=16, margin_texels=2)

@@ -3,6 +3,8 @@ import numpy as np
 import pytest
 import trimesh
 
+import jaxparam as jp
+
 from jaxparam.distance import (
     bounding_diagonal, closest_points_on_triangles, face_grid_points, point_triangle_distance,
     sample_surface,
@@ -30,19 +32,6 @@ def test_exact_against_brute_force_for_any_k():
         np.testing.assert_allclose(np.linalg.norm(q - P, axis=1), d, atol=1e-12)
 
 
-def _lathe(around: int, along: int):
-    """A surface of revolution (radius 1 + 0.3 sin z, height 10) cut into ``along`` rings of
-    ``around`` quads, two triangles each: slivers of aspect ``5 around / (pi along)``."""
-    t = np.linspace(0, 2 * np.pi, around, endpoint=False)
-    z = np.linspace(0, 10, along + 1)
-    r = 1 + 0.3 * np.sin(z)
-    V = np.stack([np.outer(r, np.cos(t)), np.outer(r, np.sin(t)), np.repeat(z[:, None], around, 1)], -1)
-    i = np.arange(around)
-    a = (np.arange(along)[:, None] * around + i).ravel()
-    b = (np.arange(along)[:, None] * around + (i + 1) % around).ravel()
-    return V.reshape(-1, 3), np.concatenate([np.stack([a, b, b + around], 1), np.stack([a, b + around, a + around], 1)])
-
-
 def test_slivers_are_exact_and_searched_through_their_boxes():
     # a mesh of revolution of slivers (aspect ~300) and a soup stretched 1000 : 1 : 0.01: the
     # ball around a sliver's centroid holds its whole neighbourhood (session 19: 139 s for
@@ -51,7 +40,8 @@ def test_slivers_are_exact_and_searched_through_their_boxes():
     from jaxparam.aabb_tree import AABBTree
 
     rng = np.random.default_rng(19)
-    V, F = _lathe(600, 3)
+    lathe = jp.shapes.revolution(600, 3)
+    V, F = np.asarray(lathe.vertices), np.asarray(lathe.faces)
     soup = rng.random((120, 3)) * [1000, 1, 0.01]
     G = rng.integers(0, 120, (200, 3))
     G = G[(G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])]
