@@ -43,3 +43,7 @@ CONVEX_SIN = 1e-12
 #: Relative residual accepted for a Newton direction: the flip-free line search checks
 #: every step, so the direction need only be a good descent direction.
 NEWTON_RESIDUAL = 1e-6
+#: Diagonal shift (relative to the mean diagonal) of a Newton Hessian whose solve missed
+#: ``NEWTON_RESIDUAL``: the shifted system is better conditioned, and its solution is still a
+#: descent direction, which the line search checks (Levenberg-Marquardt's remedy).
+NEWTON_FALLBACK_SHIFT = 1e-6
