@@ -168,7 +168,7 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
             unsure |= d_out > near - float(reach[members].max())
         unsure = np.flatnonzero(unsure)
         if unsure.size:
-            tree = AABBTree(V, F)
+            boxes = AABBTree(V, F)
 
             def improve(rows, cand):
                 r, d, face, q = _best_of(P, V, F, rows, cand)
@@ -177,7 +177,7 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
 
             for lo in range(0, unsure.size, _CHUNK // 8):
                 idx = unsure[lo:lo + _CHUNK // 8]
-                rows, cand = tree.within(P[idx], d_out[idx])
+                rows, cand = boxes.within(P[idx], d_out[idx])
                 if rows.size:
                     improve(idx[rows], cand)
     return d_out, f_out, q_out
