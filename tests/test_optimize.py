@@ -533,3 +533,55 @@ def test_free_boundary_start_falls_back_to_the_convex_map(monkeypatch):
     monkeypatch.setattr(driver, "conformal_map", lambda *a: pytest.fail("not asked for"))
     np.testing.assert_array_equal(driver.default_start(m, False, False), np.asarray(jp.convex_map(m)))
     np.testing.assert_array_equal(driver.default_start(m, True, True), np.asarray(jp.convex_map(m)))
+
+
+def _vase(around=40, along=2):
+    """A tube of revolution closed at one end by a fan: a disk whose free-boundary ARAP
+    optimum crushes triangles (session 20's held-out vase, small)."""
+    tube = jp.shapes.revolution(around, along)
+    V, F = np.asarray(tube.vertices), np.asarray(tube.faces)
+    i, c = np.arange(around), V.shape[0]
+    cap = np.stack([(i + 1) % around, i, np.full(around, c)], 1)
+    return jp.TriMesh(np.vstack([V, [0.0, 0.0, 0.0]]), np.vstack([F, cap]))
+
+
+def test_jacobi_eigh_matches_lapack_eigh():
+    from jaxparam.optimize.newton import jacobi_eigh, psd_project
+    rng = np.random.default_rng(20)
+    for k in (4, 6):
+        A = rng.standard_normal((200, k, k))
+        A = A + A.transpose(0, 2, 1)
+        A[0] = np.diag(np.arange(k, dtype=float))          # already diagonal
+        A[1] = 2.0 * np.eye(k)                             # one repeated eigenvalue
+        A[2] = 0.0                                         # nothing to rotate
+        A[3] = np.outer(np.ones(k), np.ones(k))            # rank one: k - 1 zero eigenvalues
+        A = jnp.asarray(A)
+        lam, U = jacobi_eigh(A)
+        np.testing.assert_allclose(np.sort(np.asarray(lam), -1), np.asarray(jnp.linalg.eigh(A)[0]),
+                                   rtol=0, atol=1e-12 * float(jnp.abs(A).max()))
+        np.testing.assert_allclose(np.asarray(jnp.einsum("...ji,...jk->...ik", U, U)),
+                                   np.broadcast_to(np.eye(k), A.shape), atol=1e-13)
+        np.testing.assert_allclose(np.asarray(psd_project(A, lapack=False)),
+                                   np.asarray(psd_project(A)), rtol=0,
+                                   atol=1e-12 * float(jnp.abs(A).max()))
+
+
+def test_newton_in_a_host_callback_calls_no_lapack(monkeypatch):
+    # jax.jit of an ARAP minimize hung in 3 of 4 runs on the 2-core box: the solver runs in a
+    # pure_callback on one of XLA's two pool threads, and LAPACK's batched eigh waited on the
+    # other for parts of its batch that nobody could run (optimize.in_callback).
+    import jaxparam.optimize.newton as nt
+    vase = _vase(12, 2)
+    prob = jp.optimize.Problem(vase, jp.ENERGIES["arap"], False, np.asarray(jp.convex_map(vase)))
+    args = (jnp.asarray(prob.padded.x(np.asarray(prob.x0))), *prob.padded_arrays, prob.padded.D)
+    hlo = {lap: nt.face_hessians.lower(*args, en=prob.en, project=True, lapack=lap).as_text()
+           for lap in (True, False)}
+    assert "lapack" in hlo[True] and "lapack" not in hlo[False]
+    seen = []
+    real = nt.face_hessians
+    monkeypatch.setattr(nt, "face_hessians", lambda *a, **k: seen.append(k["lapack"]) or real(*a, **k))
+    uv = jax.jit(lambda V: jp.minimize(jp.TriMesh(V, vase.faces), "arap", verbose=False).uv)(
+        jnp.asarray(vase.vertices))
+    assert np.all(np.isfinite(np.asarray(uv))) and seen and not any(seen)
+    jp.minimize(vase, "arap", verbose=False)                # outside a callback: LAPACK again
+    assert seen[-1] is True

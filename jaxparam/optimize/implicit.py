@@ -67,6 +67,7 @@ from .. import geometry as geo
 from .. import sparse
 from ..errors import SolverError
 from .base import Solver, SolveResult, StopRules, UnconvergedGradientWarning
+from .in_callback import host_callback
 from .newton import sparse_hessian
 from .problem import Problem, energy_at, free_vertices, normalized, uv_of
 
@@ -252,11 +253,12 @@ def minimize_traced(mesh, en, base, free_boundary: bool, solver: Solver, stop: S
         if not checked:
             check_start(mesh, bh)
         prob = problem_of(Vh, bh, lh, store=store)
-        res = solver.run(prob, stop, verbose=verbose)
-        if res.converged:
-            x = polish(prob, res.x)
-            if x is not res.x:
-                res = dataclasses.replace(res, x=x, energy=prob.value(x))
+        with host_callback():       # no blocking LAPACK in the solver's kernels (in_callback)
+            res = solver.run(prob, stop, verbose=verbose)
+            if res.converged:
+                x = polish(prob, res.x)
+                if x is not res.x:
+                    res = dataclasses.replace(res, x=x, energy=prob.value(x))
         flips = prob.flipped(res.x)
         runs.add(Forward(prob, res, flips))
         return (np.asarray(res.x, np.float64), np.float64(res.energy), np.int64(res.iterations),
@@ -270,7 +272,8 @@ def minimize_traced(mesh, en, base, free_boundary: bool, solver: Solver, stop: S
         if bool(check) and not bool(converged):
             unconverged_gradient(strict)
         prob = problem_of(Vh, bh, lh, take=True)
-        return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
+        with host_callback():
+            return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
 
     def solve(store, Vv, bb, fl, il):
         return jax.pure_callback(functools.partial(solve_host, store), out_shapes, Vv, bb,
