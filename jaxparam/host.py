@@ -18,7 +18,7 @@ from . import tol
 
 __all__ = ["safe_norm", "corner_geometry",  "weights_from_angles", "shape_preserving_weights",
            "frame_coordinates", "face_quantities", "circle", "signed_areas", "face_areas",
-           "vertex_normals"]
+           "vertex_normals", "collapsed_faces"]
 
 
 def safe_norm(x, axis=-1):
@@ -156,6 +156,20 @@ def face_quantities(V, F, uv) -> dict:
     R = _safe_sqrt(Fh * Fh + G * G)
     area_uv = 0.5 * (q1[:, 0] * q2[:, 1] - q1[:, 1] * q2[:, 0])
     return {"J": J, "s1": Qs + R, "s2": Qs - R, "area3d": 0.5 * safe_norm(n), "area_uv": area_uv}
+
+
+def collapsed_faces(V, F, uv, quantities: dict | None = None) -> np.ndarray:
+    """``(m,) bool``: the faces whose UV triangle is positive but collapsed, its map's aspect
+    ``s1 / s2`` above :data:`jaxparam.tol.COLLAPSED_ASPECT` (``V (n, 3)``, ``F (m, 3)``, ``uv (n,
+    2)``; ``quantities``: their :func:`face_quantities` when already computed).
+    ``s1 / s2 = s1^2 / det J`` (``s2 = s1 - 2R`` cancels at such aspects).  Flipped, degenerate
+    and non-finite faces are not counted here (:func:`jaxparam.metrics.flips` counts them)."""
+    q = quantities if quantities is not None else face_quantities(
+        np.asarray(V, np.float64), np.asarray(F), np.asarray(uv, np.float64))
+    J, s1 = q["J"], q["s1"]
+    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    with np.errstate(invalid="ignore", over="ignore"):
+        return (q["area_uv"] > 0) & (s1 * s1 > tol.COLLAPSED_ASPECT * det)
 
 
 def _safe_sqrt(x):

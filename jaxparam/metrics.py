@@ -6,6 +6,8 @@ face areas; ``s1 >= s2`` the singular values of each face's Jacobian):
 - ``sym_dirichlet``: ``s1^2 + s2^2 + s1^-2 + s2^-2``; 4 for an isometry.
 - ``mips``: ``s1/s2 + s2/s1`` (E2 of §6); 2 for a conformal map.
 - ``max_aspect``: the largest ``s1/s2``.
+- ``collapsed``: faces not flipped whose ``s1/s2`` exceeds ``tol.COLLAPSED_ASPECT`` (1e6):
+  numerically segments in the UVs, with no texels across.
 - ``angle_distortion``: ``(s1/s2 + s2/s1)/2 - 1``; 0 for a conformal map.
 - ``area_distortion``: ``(a + 1/a)/2 - 1`` with ``a = s1 s2`` rescaled so the
   UV and 3D total areas agree; 0 for an area-preserving map (up to scale).
@@ -54,6 +56,7 @@ class DistortionReport:
     faces: int
     flips: int
     degenerate: int
+    collapsed: int
     boundary_overlaps: int
     sym_dirichlet: float
     mips: float
@@ -299,6 +302,8 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
     return DistortionReport(
         # A face with a non-finite UV corner is no triangle: flipped and degenerate both.
         vertices=t.n_vertices, faces=t.n_faces, flips=int(np.sum(~(auv > 0))),
-        degenerate=int(np.sum((auv == 0) | ~np.isfinite(auv))), boundary_overlaps=boundary_overlaps(mesh, uv),
+        degenerate=int(np.sum((auv == 0) | ~np.isfinite(auv))),
+        collapsed=int(np.sum(host.collapsed_faces(None, None, None, fd))),
+        boundary_overlaps=boundary_overlaps(mesh, uv),
         sym_dirichlet=sd, mips=mips, max_aspect=aspect, angle_distortion=float(ang),
         area_distortion=area_d, unreferenced_vertices=int((~t.referenced).sum()), theorem1=cert)

@@ -545,6 +545,36 @@ def _vase(around=40, along=2):
     return jp.TriMesh(np.vstack([V, [0.0, 0.0, 0.0]]), np.vstack([F, cap]))
 
 
+def test_collapsed_triangles_are_counted_and_warned():
+    from jaxparam.optimize import CollapsedMapWarning
+    vase = _vase()
+    with pytest.warns(CollapsedMapWarning, match=r"triangles collapsed in the UVs.*'arap'"):
+        res = jp.minimize(vase, "arap", free_boundary=True, verbose=False)
+    assert res.flips == 0 and res.collapsed >= 1
+    rep = jp.distortion(vase, res.uv)
+    assert rep.collapsed == res.collapsed and rep.max_aspect > jp.tol.COLLAPSED_ASPECT
+    # the count is the faces' aspect, checked here from the Jacobians' singular values
+    fd = jp.metrics.face_distortion(vase, res.uv)
+    aspect = np.asarray(fd["s1"]) ** 2 / (np.asarray(fd["area_uv"]) / np.asarray(fd["area3d"]))
+    assert int(np.sum(aspect > jp.tol.COLLAPSED_ASPECT)) == res.collapsed
+    # a barrier energy on the same disk: none, and no warning
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CollapsedMapWarning)
+        res = jp.minimize(vase, "symmetric_dirichlet", free_boundary=True, verbose=False)
+    assert res.collapsed == 0 and jp.distortion(vase, res.uv).collapsed == 0
+
+
+def test_collapsed_count_under_jit_equals_the_host_one():
+    vase = _vase(40, 4)         # its fixed-boundary ARAP optimum collapses a ring
+    F = vase.faces
+    count = jax.jit(lambda V: jp.minimize(jp.TriMesh(V, F), "arap", verbose=False).collapsed)(
+        jnp.asarray(vase.vertices))
+    with pytest.warns(jp.optimize.CollapsedMapWarning):
+        host = jp.minimize(vase, "arap", verbose=False).collapsed
+    assert int(count) == host > 0
+
+
 def test_jacobi_eigh_matches_lapack_eigh():
     from jaxparam.optimize.newton import jacobi_eigh, psd_project
     rng = np.random.default_rng(20)

@@ -164,7 +164,9 @@ def cmd_flatten(args) -> int:
     return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
                   save_stage="save", texture=texture,
                   line=f"{args.output}: {rep['vertices']} vertices, {rep['faces']} faces, "
-                       f"{rep['flips']} flipped, max aspect {rep['max_aspect']:.3g}")
+                       f"{rep['flips']} flipped, "
+                       + (f"{rep['collapsed']} collapsed, " if rep.get("collapsed") else "")
+                       + f"max aspect {rep['max_aspect']:.3g}")
 
 
 def cmd_meshless(args) -> int:

@@ -89,9 +89,9 @@ def write_json(path, data) -> None:
 
 
 #: The metrics a report takes from :func:`jaxparam.distortion`, in order.
-REPORT_KEYS = ("vertices", "faces", "flips", "boundary_overlaps", "sym_dirichlet", "mips",
-               "max_aspect", "angle_distortion", "area_distortion", "unreferenced_vertices",
-               "theorem1")
+REPORT_KEYS = ("vertices", "faces", "flips", "collapsed", "boundary_overlaps", "sym_dirichlet",
+               "mips", "max_aspect", "angle_distortion", "area_distortion",
+               "unreferenced_vertices", "theorem1")
 
 
 def report_dict(mesh, uv, *, weights=None, seconds=None, extra=None) -> dict:

@@ -20,7 +20,8 @@ from ..progress import progress
 from .problem import Problem
 
 __all__ = ["StopRules", "SolveResult", "Step", "Solver", "HostLoopSolver", "Monitor",
-           "start_point", "progress_bar", "REASONS", "UnconvergedGradientWarning"]
+           "start_point", "progress_bar", "REASONS", "UnconvergedGradientWarning",
+           "CollapsedMapWarning"]
 
 
 class UnconvergedGradientWarning(UserWarning):
@@ -32,6 +33,16 @@ class UnconvergedGradientWarning(UserWarning):
     ``"gradient"``) instead; ``warnings.simplefilter("error", UnconvergedGradientWarning)``
     turns every such warning into an error.
     """
+
+
+class CollapsedMapWarning(UserWarning):
+    """Issued when :func:`jaxparam.minimize` ends with collapsed UV triangles: none flipped,
+    but some with an aspect ``s1 / s2`` above :data:`jaxparam.tol.COLLAPSED_ASPECT`, segments
+    in all but name (the result's ``collapsed`` counts them).  Energies without a barrier
+    against it (``"arap"``, ``"conformal"``, ``"angle"``, user energies) can end there; the
+    barrier energies (``"symmetric_dirichlet"``, ``"mips"``) cannot.
+    """
+
 
 #: The ``reason`` strings of :class:`SolveResult`, by the rule that stopped the run.
 REASONS = {

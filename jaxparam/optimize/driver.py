@@ -3,6 +3,7 @@ to a solver (or to :func:`~jaxparam.optimize.implicit.minimize_traced` when an i
 ``jax.grad``, ``jax.vmap``, ``jax.jit``)."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import jax
@@ -13,11 +14,12 @@ from .. import energies as en_mod
 from .. import geometry as geo
 from .. import metrics
 from .. import tol
-from ..host import face_areas as host_face_areas, signed_areas as host_signed_areas
+from ..host import (collapsed_faces, face_areas as host_face_areas, face_quantities,
+                    signed_areas as host_signed_areas)
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
-from .base import Solver, StopRules
+from .base import CollapsedMapWarning, Solver, StopRules
 from .conformal import conformal_map, orient_disks
 from .implicit import is_traced, minimize_traced
 from .problem import Problem
@@ -37,6 +39,9 @@ class MinimizeResult:
     iteration, the start first); ``seconds`` (wall time, compilation included);
     ``reason`` (why it stopped); ``flips`` (always 0 from an injective start);
     ``boundary_overlaps`` (free boundary: crossings of the boundary with itself);
+    ``collapsed`` (faces not flipped but of aspect ``s1 / s2`` above
+    :data:`jaxparam.tol.COLLAPSED_ASPECT`: segments in all but name, which an energy without
+    a barrier can end with; :func:`minimize` warns :class:`CollapsedMapWarning` then);
     ``solver`` (the solver's registry name); ``times`` (seconds since the start at each
     entry of ``history``).  Under ``jax.jit`` and ``jax.vmap`` the scalars are JAX
     arrays and the lists empty (:func:`minimize` says which).
@@ -51,6 +56,7 @@ class MinimizeResult:
     reason: str
     flips: int
     boundary_overlaps: int
+    collapsed: int
     solver: str = "newton"
     times: list = field(default_factory=list, repr=False)
 
@@ -65,6 +71,35 @@ def check_start(mesh, uv0, where: str = "minimize") -> None:
             f"{where}: the start is not injective: {bad.size} of {A.size} triangles are flipped or "
             f"degenerate (first: face {int(bad[0])}); start from a one-to-one map such as "
             "jp.convex_map(mesh) (positive weights, convex boundary).", stage="init")
+
+
+def warn_collapsed(mesh, uv: np.ndarray, energy: str, where: str = "minimize",
+                   stacklevel: int = 3) -> int:
+    """The number of collapsed faces of ``uv (n, 2)`` (:func:`jaxparam.host.collapsed_faces`),
+    warning :class:`CollapsedMapWarning` when there are any."""
+    F = np.asarray(mesh.faces)
+    V = np.asarray(mesh.vertices, np.float64)
+    bad = np.flatnonzero(collapsed_faces(V, F, uv))
+    if bad.size:
+        q = face_quantities(V, F[bad], np.nan_to_num(uv))
+        J = q["J"]
+        worst = float(np.max(q["s1"] ** 2 / (J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0])))
+        warnings.warn(
+            f"{where}: {bad.size} of {F.shape[0]} triangles collapsed in the UVs (not flipped, "
+            f"but of aspect s1/s2 above {tol.COLLAPSED_ASPECT:.0e}, up to {worst:.2g}; first: "
+            f"face {int(bad[0])}), so they get no texels across: the energy {energy!r} has no "
+            "barrier against a triangle shrinking to a segment. Minimize one that has: "
+            "'symmetric_dirichlet' or 'mips'.", CollapsedMapWarning, stacklevel=stacklevel)
+    return int(bad.size)
+
+
+def _collapsed_traced(mesh, uv):
+    """:func:`warn_collapsed`'s count in JAX (under ``jax.jit`` or ``jax.vmap``), no warning."""
+    V = jnp.asarray(mesh.vertices, jnp.float64)
+    J = geo.jacobians(V, mesh.faces, uv)
+    s1, _ = geo.singular_values(J)
+    det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+    return jnp.sum((det > 0) & (s1 * s1 > tol.COLLAPSED_ASPECT * det))
 
 
 def _concrete(a):
@@ -228,7 +263,8 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
                           converged=res.converged, history=res.history, seconds=res.seconds,
                           reason=res.reason, flips=prob.flipped(res.x),
                           boundary_overlaps=metrics.boundary_overlaps(mesh, uv) if free_boundary else 0,
-                          solver=solver.name, times=res.times)
+                          collapsed=warn_collapsed(mesh, uv, en.name), solver=solver.name,
+                          times=res.times)
 
 
 def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, strict):
@@ -274,8 +310,11 @@ def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, stric
         return MinimizeResult(uv=uv, energy=res.energy, iterations=res.iterations,
                               converged=res.converged, history=res.history, seconds=res.seconds,
                               reason=res.reason, flips=run.flips, boundary_overlaps=overlaps,
+                              collapsed=warn_collapsed(run.problem.mesh, np.array(
+                                  run.problem.uv(res.x)), en.name, stacklevel=4),
                               solver=solver.name, times=res.times)
     # under jax.jit (the callback has not run yet) or jax.vmap (it ran once per element)
     return MinimizeResult(uv=uv, energy=info.energy, iterations=info.iterations,
                           converged=info.converged, history=[], seconds=float("nan"), reason="",
-                          flips=info.flips, boundary_overlaps=0, solver=solver.name, times=[])
+                          flips=info.flips, boundary_overlaps=0,
+                          collapsed=_collapsed_traced(mesh, uv), solver=solver.name, times=[])
