@@ -384,6 +384,28 @@ def test_fit_names_seamed_uvs_as_such(tmp_path, capsys):
     assert "texture coordinates have seams" in err and "jaxparam flatten" in err
 
 
+def test_fit_stays_near_the_mesh_and_warns_where_the_map_squeezes(tmp_path, capsys):
+    # Found in QA (session 20): jaxparam fit of a flattened halftunnel wrote a surface 7.6e9
+    # across for a mesh 12 across, exit 0.  A disk map of a vase (a tube with a cap) squeezes
+    # the tube into a ring, as camelhead's circle map squeezes its head.
+    tube = jp.shapes.revolution(16, 8)
+    V, F = np.asarray(tube.vertices), np.asarray(tube.faces)
+    i, c = np.arange(16), V.shape[0]
+    vase = jp.TriMesh(np.vstack([V, [0.0, 0.0, 0.0]]),
+                      np.vstack([F, np.stack([(i + 1) % 16, i, np.full(16, c)], 1)]))
+    for name, mesh, warned in (("vase", vase, True), ("graph", jp.shapes.graph_surface(8), False)):
+        p = tmp_path / f"{name}.obj"
+        jp.save(p, mesh, np.asarray(jp.convex_map(mesh)))
+        out = tmp_path / f"{name}_fit.obj"
+        assert main(["fit", str(p), "-o", str(out), "-q"]) == 0
+        captured = capsys.readouterr()
+        assert ("jaxparam fit: warning: the spline misses" in captured.err) == warned, captured.err
+        assert "residual RMS" in captured.out
+        X, S = np.asarray(mesh.vertices), np.asarray(jp.load(out).vertices)
+        assert np.all(np.isfinite(S))
+        assert np.abs(S - X.mean(0)).max() < 1.5 * np.abs(X - X.mean(0)).max()
+
+
 def test_meshless_merges_duplicate_points_when_asked(tmp_path, capsys):
     # Found in QA: a scan with repeated points was refused with "pass merge_duplicates=True",
     # an option the command did not have, so no command line could read it.

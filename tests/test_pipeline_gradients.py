@@ -143,8 +143,11 @@ def test_fit_surface_values_are_unchanged():
     # Clough–Tocher: SciPy's values, bitwise.  Spline: FITPACK's least-squares solution, now
     # solved in JAX/NumPy: 1e-9 of the L1 norm (measured <= 3e-10 relative, the worst the
     # rank-deficient disk5 / 6 knots case with more coefficients than points).
+    # (The spline's keys went in session 20: its default is now a penalized fit, defined on
+    # the parameters' hull; test_spline_matches_fitpack_on_the_same_knots compares its
+    # smoothing=0 with LSQBivariateSpline directly.)
     for name, mesh, uv, Q in _fit_cases():
-        for kind, knots in (("spline", None), ("spline", 6), ("spline", 2), ("clough_tocher", None)):
+        for kind, knots in (("clough_tocher", None),):
             s = jp.fit_surface(mesh, uv, kind=kind, knots=knots)
             rtol = 1e-15 if kind == "clough_tocher" else 1e-9
             check(f"fit/{name}/{kind}/{knots}/eval", s.evaluate(Q), rtol)
@@ -280,14 +283,22 @@ def test_spline_matches_fitpack_on_the_same_knots(name, knots):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ref = [LSQBivariateSpline(U[:, 0], U[:, 1], X[:, c], tu, tv, bbox=box, kx=3, ky=3) for c in range(3)]
-    s = jp.fit_surface(mesh, U, kind="spline", knots=knots)
+    s = jp.fit_surface(mesh, U, kind="spline", knots=knots, smoothing=0)
     lo, hi = U.min(0), U.max(0)
     Q = np.concatenate([U, lo + (hi - lo) * np.random.default_rng(0).random((500, 2))])
-    want = np.column_stack([r.ev(Q[:, 0], Q[:, 1]) for r in ref])
+    # the surface is defined on the parameters' convex hull (nan outside)
+    from scipy.spatial import ConvexHull
+    eq = ConvexHull(U).equations
+    reach = (Q @ eq[:, :2].T + eq[:, 2]).max(1)          # > 0 outside the hull
     got = s.evaluate(Q)
     assert isinstance(got, np.ndarray)
+    assert np.all(np.isnan(got[reach > 1e-6])) and np.all(np.isfinite(got[reach < -1e-6]))
+    Q, got = Q[reach < -1e-6], got[reach < -1e-6]
+    want = np.column_stack([r.ev(Q[:, 0], Q[:, 1]) for r in ref])
     err = np.abs(got - want).max() / np.abs(want).max()
-    assert err < 1e-8, err                             # measured <= 3.2e-10
+    # measured <= 1.2e-7 inside the hull (g25_circle, the rank-deficient disk5 / 6 knots; until
+    # session 20 the rectangle's corners, where both swing far, were in the denominator: 3.2e-10)
+    assert err < 5e-7, err
 
 
 def _fit_fixture(name):
@@ -297,6 +308,9 @@ def _fit_fixture(name):
     lo, hi = np.asarray(U0).min(0), np.asarray(U0).max(0)
     rng = np.random.default_rng(8)
     Q = lo + (hi - lo) * (0.1 + 0.8 * rng.random((80, 2)))
+    # places inside the parameters' hull, where both surfaces are defined (the disk's circle
+    # leaves the rectangle's corners out)
+    Q = Q[Delaunay(np.asarray(U0)).find_simplex(Q) >= 0]
     interior = (np.asarray(U0) > lo + 1e-6).all(1) & (np.asarray(U0) < hi - 1e-6).all(1)
     return mesh, X0, U0, Q, interior, rng
 
@@ -326,7 +340,9 @@ def test_spline_gradients(name, knots):
     # The residual too (where the spline does not interpolate: 6 knots give more coefficients
     # than points; a step well below the residual, which is a norm), and a sampled patch.
     res = float(s0.residual_rms)
-    if res > 1e-8:
+    # (graph, 6 knots: 100 coefficients for 81 points nearly interpolate under the default
+    # penalty, res 6e-6 of a unit-size surface, where the finite differences are noise)
+    if res > 1e-4 * float(jnp.abs(X0).max()):
         assert_fd(lambda X: jp.fit_surface(X, U0, kind="spline", knots=knots).residual_rms, X0,
                   jnp.asarray(rng.normal(size=X0.shape)), 1e-4 * res, 1e-6)
     assert_fd(lambda X: jnp.sum(jp.fit_surface(X, U0, kind="spline", knots=knots).sample(6).vertices ** 2),
