@@ -135,6 +135,15 @@ def _raise_edge_error(a, b, hf, n, where):
             f"{where}: edges {first_few(e)} are shared by more than two faces (edge {e[0]} by "
             f"{int(counts[over[0]])} faces); the mesh is non-manifold: split it into manifold "
             "pieces (e.g. trimesh's split) or remove the extra faces.")
+    twisted = _twisted_faces(lo * np.int64(n) + hi, a < b, hf)
+    if twisted is not None:
+        f, g = twisted
+        raise NonManifoldError(
+            f"{where}: the surface is not orientable (a Moebius strip, or a Klein bottle, inside "
+            f"it): no choice of the faces' windings makes every shared edge run opposite ways in "
+            f"its two faces (a loop of faces through faces {f} and {g} comes back turned over), "
+            "so fix_winding cannot help. jaxparam maps orientable surfaces only: cut the mesh "
+            "along a curve that crosses the twist into pieces that are orientable.")
     keys = a * np.int64(n) + b
     order = np.argsort(keys, kind="stable")
     ks = keys[order]
@@ -145,6 +154,47 @@ def _raise_edge_error(a, b, hf, n, where):
         f"(edge {e[0]} by faces {int(hf[order[dup[0]]])} and {int(hf[order[dup[0] + 1]])}); the "
         "faces' orientation is inconsistent (or there are duplicate faces): orient the faces "
         "consistently (e.g. trimesh.repair.fix_winding) and remove duplicates.")
+
+
+def _twisted_faces(edge_key: np.ndarray, forward: np.ndarray, hf: np.ndarray):
+    """``None`` when the faces can be wound consistently, else two adjacent faces ``(f, g)`` on
+    a loop that comes back turned over (the surface is not orientable).
+
+    ``edge_key (H,)`` the undirected edge of each half-edge (at most two per key),
+    ``forward (H,)`` whether it runs from the smaller vertex, ``hf (H,)`` its face.  Two faces
+    sharing an edge need opposite windings when they run it the same way; a breadth-first
+    tree (from a virtual face joined to one face of each component) fixes each face's winding,
+    summed along the tree by pointer doubling, and an edge off the tree that disagrees is the
+    twist."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    order = np.argsort(edge_key, kind="stable")
+    k = edge_key[order]
+    pair = np.flatnonzero(k[1:] == k[:-1])
+    f, g = hf[order[pair]], hf[order[pair + 1]]
+    flip = (forward[order[pair]] == forward[order[pair + 1]]).astype(np.int64)
+    m = int(hf.max()) + 1
+    _, label = connected_components(sp.coo_matrix((np.ones(f.size), (f, g)), shape=(m, m)),
+                                     directed=False)
+    first = np.unique(label, return_index=True)[1]
+    # edge weights: 1 + whether the windings must differ (0 would be no edge); the virtual
+    # face m joins each component's first face with "same"
+    src = np.r_[f, g, np.full(first.size, m)]
+    dst = np.r_[g, f, first]
+    w = np.r_[flip, flip, np.zeros(first.size, np.int64)] + 1
+    W = sp.csr_matrix((w.astype(np.float64), (src, dst)), shape=(m + 1, m + 1))
+    seq, pred = breadth_first_order(W, m, directed=True, return_predecessors=True)
+    child = seq[1:]
+    par = np.zeros(m + 1, np.int64)
+    par[child] = np.asarray(W[pred[child], child]).ravel().astype(np.int64) - 1
+    anc = pred.copy()
+    anc[m] = -1
+    while np.any(anc >= 0):             # pointer doubling: the winding relative to the root
+        up = anc >= 0
+        par[up] ^= par[anc[up]]
+        anc[up] = anc[anc[up]]
+    bad = np.flatnonzero((par[f] ^ par[g]) != flip)
+    return None if bad.size == 0 else (int(f[bad[0]]), int(g[bad[0]]))
 
 
 def _walk_fans(a: np.ndarray, succ: np.ndarray, n: int):

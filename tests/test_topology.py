@@ -130,3 +130,27 @@ def test_renumber_equals_a_fresh_build(make):
     for la, lb in zip(a.boundary_loops, b.boundary_loops):
         np.testing.assert_array_equal(la, lb)
     assert (a.n_components, a.euler, a.genus) == (b.n_components, b.euler, b.genus)
+
+
+def test_a_moebius_strip_is_named_not_orientable():
+    # Found in QA (session 20): a Moebius strip was told to "orient the faces consistently (e.g.
+    # trimesh.repair.fix_winding)", which no winding can do.
+    import jaxparam as jp
+    from jaxparam.errors import NonManifoldError
+    n = 24
+    t = 2 * np.pi * np.arange(n) / n
+    V = np.concatenate([np.stack([(1 + s * np.cos(t / 2)) * np.cos(t), (1 + s * np.cos(t / 2)) * np.sin(t),
+                                  s * np.sin(t / 2)], 1) for s in (-0.3, 0.3)])
+    i, j = np.arange(n), (np.arange(n) + 1) % n
+    # the strip's two rims swap where it closes: the last quad joins rim 0 to rim 1
+    a, b = i, np.where(j == 0, n + 0, j)
+    c, d = i + n, np.where(j == 0, 0, j + n)
+    F = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    with pytest.raises(NonManifoldError, match="not orientable.*fix_winding cannot help"):
+        jp.TriMesh(V, F)
+    # an orientable mesh with some faces flipped keeps the fix_winding advice
+    m = jp.shapes.graph_surface(6)
+    G = np.asarray(m.faces).copy()
+    G[:7] = G[:7, ::-1]
+    with pytest.raises(NonManifoldError, match="traversed in the same direction.*fix_winding"):
+        jp.TriMesh(m.vertices, G)
