@@ -19,7 +19,7 @@ from . import host as _host
 from . import sparse
 from . import weights as wts
 from .disk import disk_check, fill_holes
-from .errors import MeshError, first_few
+from .errors import MeshError, SolverError, first_few
 from .mesh import TriMesh
 from .io import as_mesh
 from .options import choose
@@ -174,8 +174,31 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
     def w_of(work):
         return wts.entry_weights(work.vertices, work.topology, weights, host=host)[0]
 
-    return _map_with(mesh, w_of, symmetric, comb.normalizes(weights), boundary, spacing, corners,
-                     backend, "convex_map", host=host)
+    try:
+        return _map_with(mesh, w_of, symmetric, comb.normalizes(weights), boundary, spacing,
+                         corners, backend, "convex_map", host=host)
+    except SolverError as exc:
+        if weights != "harmonic" or isinstance(mesh.vertices, jax.core.Tracer):
+            raise
+        raise SolverError(f"{exc} {_needle_hint(mesh)}", stage=exc.stage) from None
+
+
+def _needle_hint(mesh: TriMesh) -> str:
+    """Why harmonic weights may leave a system singular: the triangle whose smallest angle is
+    the smallest (its cotangent, unbounded there), and what to do."""
+    V = np.asarray(mesh.vertices, np.float64)
+    F = np.asarray(mesh.faces)
+    P = V[F]
+    ang = np.empty(F.shape)
+    for c in range(3):
+        a, b = P[:, (c + 1) % 3] - P[:, c], P[:, (c + 2) % 3] - P[:, c]
+        ang[:, c] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+    f = int(np.argmin(ang.min(1)))
+    t = float(ang[f].min())
+    return (f"Harmonic (cotangent) weights are unbounded on needle triangles, and face {f} "
+            f"(vertices {', '.join(str(int(v)) for v in F[f])}) has an angle of {t:.2g} rad (its "
+            f"cotangent {1 / np.tan(t) if t > 0 else float('inf'):.2g}): use weights 'mean_value' "
+            "or 'shape_preserving' (positive and bounded for any triangle), or remove the sliver.")
 
 
 def least_squares_map(mesh: TriMesh, *, mu=None, boundary="circle", spacing: str = "chord",

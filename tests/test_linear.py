@@ -212,3 +212,19 @@ def test_no_flips_on_shared_disk_meshes(name):
     for kind in ["shape_preserving", "mean_value", "uniform"]:
         uv = jp.convex_map(mesh, weights=kind)
         assert jp.distortion(mesh, uv).flips == 0, (name, kind)
+
+
+def test_harmonic_weights_on_a_needle_name_the_face():
+    # Found in QA (session 20): a needle triangle (angle 1e-12) left the harmonic system singular
+    # and the error said only "singular or badly conditioned".
+    from jaxparam.errors import SolverError
+    i, j = np.meshgrid(np.arange(11), np.arange(11), indexing="ij")
+    V = np.stack([i.ravel() / 10, j.ravel() / 10, np.zeros(121)], 1)
+    v = (np.arange(10)[:, None] * 11 + np.arange(10)).ravel()
+    F = np.concatenate([np.stack([v, v + 11, v + 12], 1), np.stack([v, v + 12, v + 1], 1)])
+    V[60] = 0.5 * (V[49] + V[61]) + [1e-13, -1e-13, 0]      # face (49, 60, 61) a needle
+    mesh = jp.TriMesh(V, F)
+    with pytest.raises(SolverError, match=r"face \d+ \(vertices 49, 60, 61\) has an angle of .* rad.*"
+                                          r"'mean_value' or 'shape_preserving'"):
+        jp.convex_map(mesh, weights="harmonic")
+    assert np.all(np.isfinite(np.asarray(jp.convex_map(mesh, weights="mean_value"))))
