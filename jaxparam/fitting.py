@@ -197,7 +197,10 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     if Xc is not None:
         ok &= np.all(np.isfinite(Xc), axis=1)
     if int(ok.sum()) < 16:
-        raise MeshError(f"fit_surface: {int(ok.sum())} points with parameters are too few (need 16).")
+        raise MeshError(f"fit_surface: {int(ok.sum())} points with parameters are too few: both "
+                        "surfaces need at least 16 (the spline's smallest grid of coefficients is "
+                        "6 x 6); refine the mesh first (jp.shapes.refine(mesh), then flatten it "
+                        "again) or sample more points.")
     rows = np.flatnonzero(ok)
     X = jnp.asarray(X_in, jnp.float64)[rows] if isinstance(X_in, jax.core.Tracer) else Xc[ok]
     U = jnp.asarray(uv, jnp.float64)[rows] if isinstance(uv, jax.core.Tracer) else Uc[ok]

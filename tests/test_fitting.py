@@ -71,6 +71,10 @@ def test_fit_errors(mesh_uv):
         jp.fit_surface(mesh, uv, kind="nurbs")
     with pytest.raises(jp.MeshError, match=r"uv must have shape"):
         jp.fit_surface(mesh, uv[:5])
+    # Found in QA (session 20): "too few (need 16)" said nothing of what to do
+    tri = jp.TriMesh(np.eye(3), [[0, 1, 2]])
+    with pytest.raises(jp.MeshError, match=r"3 points with parameters are too few.*refine the mesh"):
+        jp.fit_surface(tri, np.asarray(jp.convex_map(tri)), kind="clough_tocher")
     # Found in QA: a non-array uv crashed inside NumPy (TypeError), not with the library's error.
     with pytest.raises(jp.MeshError, match=r"uv must be an \(N, 2\) array of parameters, got str"):
         jp.fit_surface(mesh, "uv.txt")
