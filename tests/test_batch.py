@@ -81,6 +81,36 @@ def test_all_good_exits_0_and_shared_stems_keep_their_extension(folder, tmp_path
     assert "2 of 2 files flattened" in capsys.readouterr().out
 
 
+def test_no_two_inputs_write_the_same_output(folder, tmp_path, capsys):
+    """x.off, x.obj and x.obj.off: the stem rule alone gave x.obj and x.obj.off the same
+    x.obj.obj (one result silently lost, both 'ok' in the summary)."""
+    d = tmp_path / "in"
+    d.mkdir()
+    for name in ["x.off", "x.obj.off"]:
+        (d / name).write_bytes((folder / "disk.off").read_bytes())
+    (d / "x.obj").write_bytes((folder / "grid.obj").read_bytes())
+    out = tmp_path / "out"
+    assert main(["batch", str(d), "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["summary.jsonl", "x.obj.obj", "x.obj.off.obj",
+                                                      "x.off.obj"]
+    recs = read_summary(out)
+    assert [os.path.basename(r["output"]) for r in recs] == ["x.obj.obj", "x.obj.off.obj", "x.off.obj"]
+    assert jp.load(out / "x.obj.obj").n_vertices == jp.load(d / "x.obj").n_vertices
+    assert "3 of 3 files flattened" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("names, expected", [
+    (["a.obj", "b.off"], ["a.obj", "b.obj"]),
+    (["x.obj", "x.obj.off", "x.off"], ["x.obj.obj", "x.obj.off.obj", "x.off.obj"]),
+    (["A.obj", "a.off"], ["A.obj.obj", "a.off.obj"]),               # same name on macOS/Windows
+    (["A.obj", "a.obj"], ["A.obj.obj", "a.obj-2.obj"]),
+])
+def test_output_names_are_unique_ignoring_case(names, expected):
+    outs = batch.output_paths(names, "o")
+    assert [p.name for p in outs] == expected
+    assert len({p.name.casefold() for p in outs}) == len(names)
+
+
 def test_batch_usage_and_input_errors(folder, tmp_path, capsys, monkeypatch):
     assert main(["batch", str(tmp_path / "nope"), "-o", str(tmp_path / "o")]) == 3
     assert "no such folder" in capsys.readouterr().err

@@ -7,8 +7,10 @@
 Every ``.obj``, ``.off``, ``.ply`` and ``.stl`` file directly inside FOLDER
 (not in sub-folders; hidden files skipped; names in sorted order) goes
 through the same pipeline as ``jaxparam flatten`` and is written as
-``OUTFOLDER/<stem>.obj`` (when two inputs share a stem, e.g. ``a.off`` and
-``a.obj``, both keep their extension: ``a.off.obj``, ``a.obj.obj``).
+``OUTFOLDER/<stem>.obj``; an input whose ``<stem>.obj`` another input's
+output would also take keeps its full name (``a.off`` and ``a.obj`` give
+``a.off.obj`` and ``a.obj.obj``; with ``a.obj.off`` too, ``a.obj.off.obj``),
+so no two inputs ever write the same file (:func:`output_paths`).
 ``OUTFOLDER/summary.jsonl`` gets one JSON object per input file, in input
 order, with at least ``file``, ``status`` (``"ok"`` or ``"error"``),
 ``error`` (the message, or null), ``error_type``, ``output``, the report's
@@ -87,11 +89,36 @@ def find_mesh_files(folder) -> list[Path]:
 
 
 def output_paths(files, outfolder) -> list[Path]:
-    """``OUTFOLDER/<stem>.obj`` for each input; inputs that share a stem keep their extension."""
-    stems = [p.stem for p in files]
-    shared = {s for s in stems if stems.count(s) > 1}
+    """``OUTFOLDER/<name>.obj`` for each input, every name different (ignoring case, as
+    macOS and Windows do).
+
+    An input gets ``<stem>.obj`` unless another input's output would have that name; then
+    its full file name: ``<stem><ext>.obj``.  Repeated until no two names clash (``x.off``,
+    ``x.obj`` and ``x.obj.off`` become ``x.off.obj``, ``x.obj.obj`` and ``x.obj.off.obj``).
+    Full names that differ only in case (``A.obj``, ``a.obj``) get a numbered suffix,
+    ``a.obj-2.obj``, in input order.
+    """
+    files = [Path(p) for p in files]
+    full = [False] * len(files)
+    while True:
+        names = [f"{p.name if whole else p.stem}.obj" for p, whole in zip(files, full)]
+        keys = [n.casefold() for n in names]
+        clash = [not whole and keys.count(k) > 1 for k, whole in zip(keys, full)]
+        if not any(clash):
+            break
+        full = [whole or c for whole, c in zip(full, clash)]
+    taken, seen = set(keys), set()
+    for i, n in enumerate(names):
+        if keys[i] in seen:                 # full names that differ only in case
+            k = 2
+            while f"{n[:-4]}-{k}.obj".casefold() in taken:
+                k += 1
+            names[i] = f"{n[:-4]}-{k}.obj"
+            keys[i] = names[i].casefold()
+            taken.add(keys[i])
+        seen.add(keys[i])
     out = Path(outfolder)
-    return [out / (f"{p.name}.obj" if p.stem in shared else f"{p.stem}.obj") for p in files]
+    return [out / n for n in names]
 
 
 def flatten_file(path, out_path, options: dict) -> dict:
