@@ -117,6 +117,18 @@ def test_user_weights_of_wrong_sign(grid_mesh):
     # Found in QA: "a face with 2 vertices but 2 indices given".
     ("twogon.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", r"line 6: a face needs at least 3 vertices, this one has 2"),
     ("junk.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n", r"cannot read the file as \.ply \(.+\); check the format"),
+    # Found in QA: a header promising fewer faces than the file holds dropped the rest silently.
+    ("lessf.off", b"OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n",
+     r"lessf\.off, line 8: data goes on after the 1 faces the header promises: 1 more line .*2 face "
+     r"lines in all.* fix the face count in the header \(line 2: '4 1 0'\)"),
+    ("lessv.off", b"OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 3 2\n",
+     r"line 6: the header promises 3 vertices and 2 faces, but the file holds 4 vertex lines and "
+     r"then 2 face lines; fix the counts"),
+    ("lessf.ply", b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                  b"property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                  b"end_header\n0 0 0\n1 0 0\n0 1 0\n\n1 1 0\n3 0 1 2\n3 1 3 2\n",
+     r"lessf\.ply, line 16: data goes on after the 1 face elements the header promises: 1 more line "
+     r".*\(2 face lines in all.*fix the count in the header \(line 7: 'element face 1'\) or remove"),
 ])
 def test_malformed_files(tmp_path, name, content, match):
     p = tmp_path / name
@@ -126,6 +138,32 @@ def test_malformed_files(tmp_path, name, content, match):
     assert isinstance(e.value, OSError)
     assert main(["flatten", str(p), "-o", str(tmp_path / "o.obj")]) == 3
     assert not (tmp_path / "o.obj").exists()
+
+
+@pytest.mark.parametrize("name, content, cls, match", [
+    ("deg.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 4 4\n", DegenerateFaceError,
+     r"deg\.obj, line 6: the polygon with vertices \(2, 4, 4, 4\) has only 2 distinct corner"),
+    ("twice.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 1 3\n", DegenerateFaceError,
+     r"line 5: the polygon with vertices \(1, 2, 1, 3\) visits vertex 1 twice"),
+    ("deg.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n5 0 1 1 0 0\n", DegenerateFaceError,
+     r"deg\.off, line 7: the polygon with vertices \(0, 1, 1, 0, 0\) has only 2 distinct"),
+    # a pentagram: its fan folds, and no split into triangles keeps it
+    ("star5.obj", "".join(f"v {np.cos(a):.17g} {np.sin(a):.17g} 0\n" for a in
+                          2 * np.pi * np.arange(0, 10, 2) / 5) + "# a comment\nf 1 2 3 4 5\n",
+     MeshError, r"star5\.obj, line 7: the polygon with vertices \(1, 2, 3, 4, 5\) crosses itself "
+                r"\(its edges .* meet in its plane\).*split it into simple polygons"),
+])
+def test_polygons_that_cannot_be_triangulated_name_their_line(tmp_path, capsys, name, content, cls,
+                                                              match):
+    """A polygon is cleaned of repeated corners and split before the mesh's checks, so its
+    problems are named by file line, not by the numbers of the triangles it became."""
+    p = tmp_path / name
+    p.write_text(content)
+    with pytest.raises(cls, match=match) as e:
+        jp.load(p)
+    assert not isinstance(e.value, MeshFileError)      # a well-formed file with a bad face
+    assert main(["flatten", str(p), "-o", str(tmp_path / "o.obj")]) == 3
+    assert re.search(match, capsys.readouterr().err)
 
 
 def test_missing_file_and_folder(tmp_path, capsys):
@@ -270,3 +308,46 @@ def test_distortion_counts_nan_faces_and_names_a_wrong_shape(grid_mesh):
     assert jp.distortion(grid_mesh, uv).flips == 0
     with pytest.raises(MeshError, match=r"distortion: uv must have shape \(\d+, 2\).*got \(5, 2\)"):
         jp.distortion(grid_mesh, uv[:5])
+
+
+def _npy_bytes(a) -> bytes:
+    import io as _io
+    buf = _io.BytesIO()
+    np.save(buf, a)
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("name, make, match", [
+    # Found in QA: an .npz quoted its zip bytes ("cannot read numbers from 'PK\x03\x04...'"),
+    # an .off mesh said "line 1: expected 'x y z', got 'OFF'".
+    ("p.npz", lambda p: np.savez(p, a=np.zeros((5, 3))),
+     r"p\.npz: a NumPy \.npz archive, not a point file; points are read from \.xyz/\.txt/\.csv .*"
+     r"\.npy .*\.ply .*np\.save\('points\.npy', array\)"),
+    ("m.off", lambda p: p.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+     r"m\.off: an OFF mesh file \(\.off\), not a point file; points are read .* from \.xyz.*"
+     r"jaxparam flatten.*np\.save\('points\.npy', jp\.load\('.*m\.off'\)\.vertices\)"),
+    ("m.obj", lambda p: p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"),
+     r"an OBJ mesh file \(\.obj\), not a point file"),
+    ("m.xyz", lambda p: p.write_text("# exported\nOFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+     r"m\.xyz: an OFF mesh file \(its first line is 'OFF'\).* Rename it to m\.off first\..*"
+     r"jp\.load\('.*m\.off'\)"),
+    ("m.txt", lambda p: p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 1\n"),
+     r"an OBJ mesh file \(it has 'v' lines\).*Rename it to m\.obj first"),
+    ("blob.bin", lambda p: p.write_bytes(b"\x01\x02\x00\x00" * 64), r"binary data, not a point file"),
+    ("arr.dat", lambda p: p.write_bytes(_npy_bytes(np.zeros((5, 3)))),
+     r"a \.npy array under the extension '\.dat'; rename the file to end in \.npy"),
+])
+def test_point_files_of_another_kind_are_refused_with_the_formats(tmp_path, capsys, name, make, match):
+    p = tmp_path / name
+    make(p)
+    with pytest.raises(MeshFileError, match=match):
+        jp.load_points(p)
+    assert main(["-q", "meshless", str(p), "-o", str(tmp_path / "o.obj")]) == 3
+    assert re.search(match, capsys.readouterr().err)
+    assert not (tmp_path / "o.obj").exists()
+
+
+def test_csv_points_are_still_read(tmp_path):
+    p = tmp_path / "p.csv"
+    np.savetxt(p, np.arange(12.0).reshape(4, 3), delimiter=",")
+    np.testing.assert_array_equal(jp.load_points(p), np.arange(12.0).reshape(4, 3))

@@ -414,3 +414,97 @@ def test_save_refuses_nan_uvs_at_the_vertices_of_faces(tmp_path):
     stray = jp.TriMesh(np.vstack([mesh.vertices, [[9.0, 9.0, 9.0]]]), mesh.faces)
     jp.save(tmp_path / "ok.obj", stray, np.vstack([uv, [[np.nan, np.nan]]]))
     np.testing.assert_allclose(jp.load(tmp_path / "ok.obj").uv[:-1], uv)
+
+
+def _write_polygon_mesh(path, V, polys):
+    """``V`` and the polygon list ``polys`` (0-based) as an OBJ, OFF or ASCII PLY file."""
+    ext = path.suffix
+    if ext == ".obj":
+        text = "".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in V)
+        text += "".join("f " + " ".join(str(i + 1) for i in p) + "\n" for p in polys)
+    elif ext == ".off":
+        text = f"OFF\n{len(V)} {len(polys)} 0\n" + "".join(f"{x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in V)
+        text += "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys)
+    else:
+        text = (f"ply\nformat ascii 1.0\nelement vertex {len(V)}\nproperty double x\nproperty double y\n"
+                f"property double z\nelement face {len(polys)}\nproperty list uchar int vertex_indices\n"
+                "end_header\n" + "".join(f"{x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in V)
+                + "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys))
+    path.write_text(text)
+
+
+@pytest.mark.parametrize("ext", [".obj", ".off", ".ply"])
+def test_triangles_written_as_degenerate_polygons_load_as_those_triangles(tmp_path, ext):
+    """Found in QA: `f a b c c` (exporters' triangles in a quad format) gave 'faces 1, 3, 5, ...
+    repeat a vertex', numbers of the fan's triangles the user cannot find in the file."""
+    grid = jp.shapes.plane_grid(4, 4)
+    V, F = np.asarray(grid.vertices), np.asarray(grid.faces)
+    polys = [list(f) + [f[2]] if i % 3 == 0 else list(f) + [f[0]] if i % 3 == 1 else
+             [f[0], f[0], f[1], f[2], f[2]] if i % 2 else list(f) for i, f in enumerate(F)]
+    p = tmp_path / f"degquads{ext}"
+    _write_polygon_mesh(p, V, polys)
+    mesh = jp.load(p)
+    np.testing.assert_array_equal(np.asarray(mesh.faces), F)
+
+
+def test_repeated_corners_keep_their_per_corner_uvs(tmp_path):
+    p = tmp_path / "q.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvt 0.5 0.5\n"
+                 "f 1/4 1/1 2/2 3/3 3/3\n")
+    V, F, tex, T, _ = io.obj.parse_obj(p)
+    np.testing.assert_array_equal(F, [[0, 1, 2]])
+    np.testing.assert_array_equal(T, [[3, 1, 2]])    # a run keeps its first corner, with its vt
+
+
+def star_polygon(n=5, tilt=0.7):
+    """A concave 2n-gon (a star, counter-clockwise about +z) rotated about the x axis by
+    ``tilt``: ``(V (2n, 3), normal (3,), area)``."""
+    a = np.pi * np.arange(2 * n) / n
+    r = np.where(np.arange(2 * n) % 2 == 0, 1.0, 0.4)
+    P = np.stack([r * np.cos(a), r * np.sin(a)], 1)
+    area = 0.5 * np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
+    c, s = np.cos(tilt), np.sin(tilt)
+    R = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    V = np.c_[P, np.zeros(2 * n)] @ R.T + np.array([3.0, -1.0, 2.0])
+    return V, R @ np.array([0.0, 0, 1]), area
+
+
+@pytest.mark.parametrize("ext", [".obj", ".off", ".ply"])
+@pytest.mark.parametrize("start", [0, 1])              # the fan from a tip, or from a notch
+def test_a_concave_polygon_is_split_without_folds(tmp_path, ext, start):
+    """Found in QA: a concave 10-gon split by a fan gave 2 triangles of negative area in its
+    plane, and flatten ran on folded geometry.  Now: ear clipping in the polygon's plane."""
+    V, normal, area = star_polygon()
+    order = list(np.roll(np.arange(10), -start))
+    p = tmp_path / f"star{ext}"
+    _write_polygon_mesh(p, V, [order])
+    mesh = jp.load(p)
+    F = np.asarray(mesh.faces)
+    assert F.shape == (8, 3) and set(F.ravel()) == set(range(10))
+    cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    assert np.all(cross @ normal > 0)                              # no triangle folds back
+    np.testing.assert_allclose(0.5 * np.linalg.norm(cross, axis=1).sum(), area, rtol=1e-12)
+
+
+def test_convex_and_nonplanar_polygons_keep_the_fan(tmp_path):
+    """Convex polygons (and a warped quad) are split exactly as before: a fan from corner 0."""
+    t = 2 * np.pi * np.arange(6) / 6
+    V = np.vstack([np.c_[np.cos(t), np.sin(t), np.zeros(6)],
+                   [[3, 0, 0], [4, 0, 0.3], [4, 1, 0], [3, 1, 0.3]]])
+    p = tmp_path / "convex.obj"
+    _write_polygon_mesh(p, V, [list(range(6)), [6, 7, 8, 9]])
+    np.testing.assert_array_equal(np.asarray(jp.load(p).faces),
+                                  [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5], [6, 7, 8], [6, 8, 9]])
+
+
+def test_polygons_of_several_sizes_keep_the_file_order():
+    from jaxparam.io.polygons import triangulate
+
+    V, _, _ = star_polygon()
+    V = np.vstack([V, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]])
+    polys = [[10, 11, 12], list(range(10)), [11, 13, 12, 12], [10, 11, 13, 12]]
+    poly, pick = triangulate(V, polys, lambda i: f"polygon {i}")
+    assert list(poly) == [0] + [1] * 8 + [2] + [3, 3]
+    np.testing.assert_array_equal(pick[0], [0, 1, 2])
+    np.testing.assert_array_equal(pick[9], [0, 1, 2])
+    np.testing.assert_array_equal(pick[10:], [[0, 1, 2], [0, 2, 3]])

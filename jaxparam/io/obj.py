@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import MeshFileError
 from .files import read_text, write_rows
+from .polygons import polygon_corners, triangulate
 
 __all__ = ["parse_obj", "read_obj", "write_obj", "corner_to_vertex_uv", "read_number_fields"]
 
@@ -52,10 +53,12 @@ def logical_lines(text: str):
 
 def parse_obj(path):
     """An OBJ file's data in file order: ``(vertices (n, 3), faces (m, 3), vt (t, 2) or None,
-    uv_faces (m, 3) or None, dropped)``; polygons split into triangle fans.  ``uv_faces`` are
-    the faces' ``vt`` indices when every face has them; ``dropped`` counts faces without
-    ``vt`` in a file that has some (their UVs cannot be kept)."""
-    verts, tex, faces, ftex, face_lines = [], [], [], [], []
+    uv_faces (m, 3) or None, dropped)``; polygons split into triangles
+    (:func:`~jaxparam.io.polygons.triangulate`: fans, ear clipping for concave ones, repeated
+    corners merged).  ``uv_faces`` are the faces' ``vt`` indices when every face has them;
+    ``dropped`` counts faces without ``vt`` in a file that has some (their UVs cannot be
+    kept)."""
+    verts, tex, polys, ptex, poly_lines = [], [], [], [], []
     text = read_text(path)
     for line_no, raw in logical_lines(text):
         line = raw.split("#", 1)[0].strip()
@@ -79,35 +82,39 @@ def parse_obj(path):
                 vi.append(_obj_index(fields[0], len(verts), path, line_no))
                 if len(fields) > 1 and fields[1]:
                     ti.append(_obj_index(fields[1], len(tex), path, line_no))
-            for k in range(1, len(vi) - 1):
-                faces.append([vi[0], vi[k], vi[k + 1]])
-                face_lines.append(line_no)
-                ftex.append([ti[0], ti[k], ti[k + 1]] if len(ti) == len(vi) else None)
+            polys.append(vi)
+            ptex.append(ti if len(ti) == len(vi) else None)
+            poly_lines.append(line_no)
     if not verts:
         raise MeshFileError(f"{path}: no vertices ('v' lines) found; is this an OBJ mesh file?")
-    if not faces:
+    if not polys:
         raise MeshFileError(f"{path}: no faces ('f' lines) found; jaxparam needs a triangle mesh "
                             "(for bare points use jaxparam meshless).")
     V = np.asarray(verts, np.float64)
-    F = np.asarray(faces, np.int64)
     # Positive indices may refer to elements defined further down (as libigl and trimesh read
     # them); only now is it known whether they exist.
-    _check_forward(F, len(verts), face_lines, path, "vertex")
-    missing = sum(t is None for t in ftex)
+    _check_forward(polys, len(verts), poly_lines, path, "vertex")
+    poly, pick = triangulate(V, polys, lambda i: f"{path}, line {poly_lines[i]}", base=1)
+    flat, start = polygon_corners(polys)
+    corner = start[poly][:, None] + pick                    # (m, 3) into ``flat``
+    F = flat[corner]
+    textured = np.array([t is not None for t in ptex])
+    missing = int(np.count_nonzero(~textured[poly]))
     if not tex or missing:
-        return V, F, None, None, missing if tex and missing < len(ftex) else 0
-    T = np.asarray(ftex, np.int64)
-    _check_forward(T, len(tex), face_lines, path, "texture coordinate")
-    return V, F, np.asarray(tex, np.float64), T, 0
+        return V, F, None, None, missing if tex and missing < F.shape[0] else 0
+    _check_forward(ptex, len(tex), poly_lines, path, "texture coordinate")
+    tflat, _ = polygon_corners(ptex)
+    return V, F, np.asarray(tex, np.float64), tflat[corner], 0
 
 
-def _check_forward(F, count: int, face_lines, path, what: str) -> None:
-    """A :class:`MeshFileError` naming the first face line whose index in ``F`` (0-based)
-    is at or past ``count``, the number of elements in the whole file."""
-    bad = np.flatnonzero(F.max(axis=1) >= count) if F.size else F
+def _check_forward(polys, count: int, poly_lines, path, what: str) -> None:
+    """A :class:`MeshFileError` naming the first face line whose index in ``polys`` (lists
+    of 0-based indices) is at or past ``count``, the number of elements in the whole file."""
+    top = np.fromiter((max(p) for p in polys), np.int64, len(polys))
+    bad = np.flatnonzero(top >= count)
     if bad.size:
         i = int(bad[0])
-        raise MeshFileError(f"{path}, line {face_lines[i]}: index {int(F[i].max()) + 1} is out "
+        raise MeshFileError(f"{path}, line {poly_lines[i]}: index {int(top[i]) + 1} is out "
                             f"of range: the file defines only {count} ({what} lines); the file "
                             "is truncated or malformed.")
 
@@ -125,8 +132,8 @@ def read_obj(path):
     """Read an OBJ file keeping the vertex order: ``(vertices, faces, uv_or_None)``,
     ``(n, 3) float64``, ``(m, 3) int64`` (0-based) and ``(n, 2) float64`` or None.
 
-    Polygons are split into triangle fans; negative (relative) indices are
-    honoured; ``vt`` coordinates become per-vertex UVs when every face corner
+    Polygons are split into triangles (fans; ear clipping for concave ones); negative
+    (relative) indices are honoured; ``vt`` coordinates become per-vertex UVs when every face corner
     of a vertex uses the same one (per-corner UVs: :func:`parse_obj`, or ``jp.load``,
     which keeps them as ``mesh.texcoords`` and ``mesh.uv_faces``).
     """

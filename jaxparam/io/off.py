@@ -13,13 +13,15 @@ import numpy as np
 from ..errors import MeshFileError
 from .files import read_text, write_rows
 from .obj import read_number_fields
+from .polygons import polygon_corners, triangulate
 
 __all__ = ["read_off", "write_off", "fast_off"]
 
 
 def read_off(path):
     """Read an OFF file keeping the vertex order: ``(vertices, faces)``, ``(n, 3) float64`` and
-    ``(m, 3) int64``; polygons are split into triangle fans.
+    ``(m, 3) int64``; polygons are split into triangles (fans; ear clipping for concave
+    ones; repeated corners merged: :func:`~jaxparam.io.polygons.triangulate`).
 
     A file of triangles with three numbers a vertex line is read vectorized
     (:func:`fast_off`, 20x faster); any other file, and any file with an error, line by line,
@@ -53,12 +55,14 @@ def read_off(path):
     if len(body) < nv + nf:
         raise MeshFileError(f"{path}: the header promises {nv} vertices and {nf} faces but the file has "
                             f"only {len(body)} data lines; the file is truncated or the counts are wrong.")
+    if len(body) > nv + nf:
+        raise _too_much_data(path, rest[0], body, nv, nf)
     V = np.empty((nv, 3))
     for i in range(nv):
         ln, toks = body[i]
         V[i] = read_number_fields(toks, 3, path, ln, "a coordinate",
                         f"a vertex needs three coordinates, got {len(toks)}.")
-    faces = []
+    polys, lines = [], []
     for j in range(nf):
         ln, toks = body[nv + j]
         try:
@@ -74,10 +78,44 @@ def read_off(path):
         bad = [i for i in idx if i < 0 or i >= nv]
         if bad:
             raise MeshFileError(f"{path}, line {ln}: vertex index {bad[0]} is out of range [0, {nv}).")
-        faces.extend([idx[0], idx[t], idx[t + 1]] for t in range(1, k - 1))
-    if not faces:
+        polys.append(idx)
+        lines.append(ln)
+    if not polys:
         raise MeshFileError(f"{path}: the file has no faces.")
-    return V, np.asarray(faces, np.int64)
+    poly, pick = triangulate(V, polys, lambda i: f"{path}, line {lines[i]}")
+    flat, start = polygon_corners(polys)
+    return V, flat[start[poly][:, None] + pick]
+
+
+def _looks_like_a_face(toks) -> bool:
+    """Whether an OFF data line reads as a face: ``k i1 ... ik`` with ``k >= 3`` integers."""
+    try:
+        k = int(toks[0])
+        return k >= 3 and len(toks) > k and all(int(t) >= 0 for t in toks[1:1 + k])
+    except ValueError:
+        return False
+
+
+def _too_much_data(path, counts_line, body, nv: int, nf: int) -> MeshFileError:
+    """The error for an OFF file with more data lines than its header's counts promise,
+    naming the line where the data departs from the counts and the counts found."""
+    ln_counts, counts = counts_line
+    header = f"line {ln_counts}: {' '.join(counts)!r}"
+    first_face = next((i for i, (_, toks) in enumerate(body) if _looks_like_a_face(toks)), len(body))
+    found_f = len(body) - first_face
+    if first_face != nv and first_face < len(body):
+        ln = body[min(nv, first_face)][0]
+        return MeshFileError(
+            f"{path}, line {ln}: the header promises {nv} vertices and {nf} faces, but the file "
+            f"holds {first_face} vertex lines and then {found_f} face lines; fix the counts in "
+            f"the header ({header}) or remove the extra lines.")
+    ln = body[nv + nf][0]
+    extra = len(body) - nv - nf
+    return MeshFileError(
+        f"{path}, line {ln}: data goes on after the {nf} faces the header promises: {extra} more "
+        f"line{'s' if extra != 1 else ''} from here ({nf + extra} face lines in all after the "
+        f"{nv} vertices); fix the face count in the header ({header}) or remove the extra "
+        "lines.")
 
 
 def fast_off(text: str):

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import MeshFileError
 from .files import existing_file
+from .polygons import triangulate
 
 __all__ = ["read_ply", "write_ply", "UV_NAMES"]
 
@@ -26,15 +27,16 @@ _TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2
 
 
 def _header(data: bytes, path):
-    """``(format, elements, body offset)``; ``elements`` = ``[(name, count, props)]`` with
-    ``props`` = ``[(name, type)]`` or ``[(name, (count_type, item_type))]`` for lists."""
+    """``(format, elements, body offset, declared)``; ``elements`` = ``[(name, count, props)]``
+    with ``props`` = ``[(name, type)]`` or ``[(name, (count_type, item_type))]`` for lists;
+    ``declared`` = ``{name: (line number, text)}`` of each ``element`` header line."""
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
         raise MeshFileError(f"{path}: not a PLY file (it must start with 'ply' and have an "
                             "'end_header' line).")
     nl = data.find(b"\n", end)
     body = len(data) if nl < 0 else nl + 1
-    fmt, elements = None, []
+    fmt, elements, declared = None, [], {}
     for line_no, raw in enumerate(data[:end].decode("latin-1").splitlines(), 1):
         tok = raw.split()
         if not tok or tok[0] in ("ply", "comment", "obj_info"):
@@ -50,6 +52,7 @@ def _header(data: bytes, path):
                 raise MeshFileError(f"{path}, line {line_no}: cannot read the count of element "
                                     f"{tok[1]!r} from {tok[2]!r}.")
             elements.append((tok[1], count, []))
+            declared[tok[1]] = (line_no, raw.strip())
         elif tok[0] == "property" and elements:
             if len(tok) == 5 and tok[1] == "list" and tok[2] in _TYPES and tok[3] in _TYPES:
                 elements[-1][2].append((tok[4], (_TYPES[tok[2]], _TYPES[tok[3]])))
@@ -62,7 +65,7 @@ def _header(data: bytes, path):
     if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
         raise MeshFileError(f"{path}: cannot read the PLY format {fmt!r} (ascii, "
                             "binary_little_endian or binary_big_endian).")
-    return fmt, elements, body
+    return fmt, elements, body, declared
 
 
 def _truncated(path, name, count):
@@ -179,43 +182,54 @@ def _ascii_fixed(rows, props):
 def read_elements(path) -> dict:
     """Every element of a PLY file: ``{element: {property: array}}``, in file order; a list
     property is ``(count, k)`` when all rows have ``k`` items, else a list of arrays."""
+    return read_elements_located(path)[0]
+
+
+def read_elements_located(path):
+    """``(elements, lines)``: :func:`read_elements`' dictionary and, for an ASCII file,
+    ``{element: (count,) file line of each row}`` (``None`` for a binary file).
+
+    Raises :class:`MeshFileError` when an ASCII file has data lines after the last element
+    the header declares (its count is too small), naming the line where they start; that
+    error has ``complete = True`` (:func:`read_ply` passes its message on as it is).
+    """
     p = existing_file(path)
     data = p.read_bytes()
     if not data:
         raise MeshFileError(f"{path}: the file is empty.")
-    fmt, elements, pos = _header(data, path)
+    fmt, elements, pos, declared = _header(data, path)
     out = {}
     if fmt == "ascii":
-        lines, pos = [ln for ln in data[pos:].decode("latin-1").splitlines() if ln.strip()], 0
+        first = data[:pos].count(b"\n") + 1             # the file line of the body's first line
+        numbered = [(first + i, ln) for i, ln in enumerate(data[pos:].decode("latin-1").splitlines())
+                    if ln.strip()]
+        lines, pos, where = [ln for _, ln in numbered], 0, {}
         for name, count, props in elements:
+            where[name] = np.array([n for n, _ in numbered[pos:pos + max(count, 0)]], np.int64)
             out[name], pos = _ascii_element(lines, pos, name, count, props, path)
-    else:
-        order = "<" if fmt == "binary_little_endian" else ">"
-        for name, count, props in elements:
-            out[name], pos = _binary_element(data, pos, name, count, props, order, path)
-    return out
-
-
-def _fan(rows):
-    """Triangle fans of polygon rows: ``(m, 3)`` and, per triangle, its polygon and corner picks."""
-    if isinstance(rows, np.ndarray) and rows.ndim == 2:
-        k = rows.shape[1]
-        t = np.arange(1, k - 1)
-        pick = np.stack([np.zeros_like(t), t, t + 1], 1)            # (k-2, 3) corner picks
-        poly = np.repeat(np.arange(rows.shape[0]), t.size)
-        return poly, np.tile(pick, (rows.shape[0], 1))
-    poly, picks = [], []
-    for i, r in enumerate(rows):
-        t = np.arange(1, len(r) - 1)
-        poly.append(np.full(t.size, i))
-        picks.append(np.stack([np.zeros_like(t), t, t + 1], 1))
-    return (np.concatenate(poly) if poly else np.zeros(0, np.int64),
-            np.concatenate(picks) if picks else np.zeros((0, 3), np.int64))
+        if pos < len(lines) and elements:
+            name, count, _ = elements[-1]
+            extra = len(lines) - pos
+            decl_line, decl = declared[name]
+            exc = MeshFileError(
+                f"{path}, line {numbered[pos][0]}: data goes on after the {count} {name} "
+                f"elements the header promises: {extra} more line{'s' if extra != 1 else ''} from "
+                f"here ({count + extra} {name} lines in all, if they are all {name}s); fix the "
+                f"count in the header (line {decl_line}: {decl!r}) or remove the extra lines.")
+            exc.complete = True
+            raise exc
+        return out, where
+    order = "<" if fmt == "binary_little_endian" else ">"
+    for name, count, props in elements:
+        out[name], pos = _binary_element(data, pos, name, count, props, order, path)
+    return out, None
 
 
 def read_ply(path):
     """Read a PLY mesh in file order: ``(vertices (n, 3), faces (m, 3), uv (n, 2) or None,
-    texcoords (t, 2) or None, uv_faces (m, 3) or None)``; polygons become triangle fans.
+    texcoords (t, 2) or None, uv_faces (m, 3) or None)``; polygons are split into triangles
+    (fans; ear clipping for concave ones; repeated corners merged:
+    :func:`~jaxparam.io.polygons.triangulate`).
 
     Per-vertex UVs come from the vertex properties :data:`UV_NAMES`; per-corner UVs from a
     face list ``texcoord`` (2 numbers per corner).  Raises :class:`MeshFileError` for a
@@ -228,6 +242,8 @@ def read_ply(path):
     try:
         return _read_ply(path)
     except MeshFileError as exc:
+        if getattr(exc, "complete", False):
+            raise MeshFileError(str(exc)) from None
         detail = str(exc)
         for head in (f"{path}: ", f"{path}, "):
             if detail.startswith(head):
@@ -237,7 +253,7 @@ def read_ply(path):
 
 
 def _read_ply(path):
-    el = read_elements(path)
+    el, lines = read_elements_located(path)
     vert = el.get("vertex", {})
     if not all(c in vert for c in "xyz"):
         raise MeshFileError(f"{path}: the PLY file has no vertex x, y, z properties.")
@@ -254,19 +270,33 @@ def _read_ply(path):
             raise MeshFileError(f"{path}: face {short[0]} has fewer than three vertices.")
     elif rows.ndim != 2 or rows.shape[1] < 3:
         raise MeshFileError(f"{path}: the faces have fewer than three vertices.")
-    poly, pick = _fan(rows)
-    flat = np.concatenate([np.asarray(r) for r in rows]) if isinstance(rows, list) else rows.reshape(-1)
-    start = (np.concatenate([[0], np.cumsum([len(r) for r in rows])[:-1]]).astype(np.int64)
-             if isinstance(rows, list) else np.arange(rows.shape[0]) * rows.shape[1])
-    corner = start[poly][:, None] + pick                              # (m, 3) into ``flat``
-    F = np.asarray(flat, np.float64)[corner] if flat.size else np.zeros((0, 3))
-    if F.size == 0:
+    if len(rows) == 0:
         raise MeshFileError(f"{path}: the PLY file has no faces.")
-    if np.any(F != np.round(F)) or np.any(F < 0) or np.any(F >= V.shape[0]):
-        bad = int(np.flatnonzero(np.any((F < 0) | (F >= V.shape[0]) | (F != np.round(F)), 1))[0])
-        raise MeshFileError(f"{path}: face {int(poly[bad])} has a vertex index out of range "
+    if isinstance(rows, list):
+        sizes = np.array([len(r) for r in rows], np.int64)
+        flat = np.concatenate([np.asarray(r, np.float64) for r in rows])
+    else:
+        sizes = np.full(rows.shape[0], rows.shape[1], np.int64)
+        flat = np.asarray(rows, np.float64).reshape(-1)
+    start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    wrong = (flat != np.round(flat)) | (flat < 0) | (flat >= V.shape[0])
+    if np.any(wrong):
+        bad = int(np.searchsorted(start, np.flatnonzero(wrong)[0], side="right") - 1)
+        raise MeshFileError(f"{path}: face {bad} has a vertex index out of range "
                             f"[0, {V.shape[0]}).")
-    F = F.astype(np.int64)
+    flat = flat.astype(np.int64)
+    polys = (flat.reshape(rows.shape) if not isinstance(rows, list)
+             else [flat[s:s + n] for s, n in zip(start, sizes)])
+    face_lines = None if lines is None else lines.get("face")
+    if face_lines is not None and face_lines.size == len(rows):
+        def where(i):
+            return f"{path}, line {int(face_lines[i])} (face {i})"
+    else:
+        def where(i):
+            return f"{path}, face {i}"
+    poly, pick = triangulate(V, polys, where)
+    corner = start[poly][:, None] + pick                              # (m, 3) into ``flat``
+    F = flat[corner]
     uv = next((np.stack([np.asarray(vert[a], np.float64), np.asarray(vert[b], np.float64)], 1)
                for a, b in UV_NAMES if a in vert and b in vert), None)
     tex = T = None
