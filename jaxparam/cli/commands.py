@@ -179,6 +179,12 @@ def cmd_meshless(args) -> int:
                                   boundary=canonical(args.boundary),
                                   merge_duplicates=args.merge_duplicates)
     except PointCloudError as exc:
+        if "boundary=indices" in str(exc):
+            # options of the Python API that the command line has not
+            raise PointCloudError(
+                str(exc).rstrip(".") + ": on the command line, cut the surface open (keep a "
+                "disk-like part of the points); boundary indices and the gap are options of "
+                "jp.reconstruct_surface(points, boundary_indices=..., gap=...) in Python.") from None
         if "merge_duplicates=True" not in str(exc):
             raise
         raise PointCloudError(str(exc).replace("pass merge_duplicates=True",

@@ -10,7 +10,8 @@ import math
 
 __all__ = ["K", "K_DETECT", "K_FRAME", "GAP", "MAX_SLOPE", "MIN_NORMAL_DOT", "BRIDGE_FACTOR", "FLIP_ROUNDS",
            "OUTLIER_SCALE", "OUTLIER_HEIGHT", "OUTLIER_ISOLATION",
-           "OUTLIER_ROUNDS", "EAR_MAX_BASE"]
+           "OUTLIER_ROUNDS", "OUTLIER_MIN_NEIGHBOURS", "EAR_MAX_BASE",
+           "CHORD_TOL", "CHORD_ROUNDS"]
 
 #: Nearest neighbours per point in the map's fans (survey §8's ``k``).
 K = 10
@@ -60,7 +61,22 @@ OUTLIER_ISOLATION = 2.5
 #: 490 + 33 + 1); with two the last one stayed a vertex, 3-5 % off the surface.
 OUTLIER_ROUNDS = 4
 
+#: Fewest neighbours per point the outlier test needs (a point set of fewer than this many plus
+#: one points has none): a plane fits three points exactly, so with a handful of neighbours their
+#: robust noise scale is rounding and every point of a curved or random set stood "far above" it
+#: (4 points: heights of 1e11 noise scales).  Random 4-8-point sets lost most of their points
+#: that way, leaving too few for the map.
+OUTLIER_MIN_NEIGHBOURS = 8
+
 #: An ear (a boundary face over a notch whose apex the detection missed) is peeled only when
 #: its boundary edge is at most this many of the apex's spacings: longer, the boundary is
 #: sparse there and the face covers the surface.
 EAR_MAX_BASE = 1.1
+
+#: An interior point of the map lies on a chord of the boundary polygon when its distance from
+#: the chord is at most this fraction of the chord's length: Delaunay gives it a face of zero
+#: area there (:func:`~jaxparam.points.triangulation.onto_chords` puts it on the boundary).
+CHORD_TOL = 1e-9
+
+#: Most times the map is solved again with such points put on the boundary.
+CHORD_ROUNDS = 4

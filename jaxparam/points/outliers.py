@@ -7,7 +7,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..blocks import for_blocks
-from .defaults import GAP, OUTLIER_HEIGHT, OUTLIER_ISOLATION, OUTLIER_SCALE
+from .defaults import GAP, OUTLIER_HEIGHT, OUTLIER_ISOLATION, OUTLIER_MIN_NEIGHBOURS, OUTLIER_SCALE
 from .graph import DENSE_BLOCK, Frames
 
 __all__ = ["find_outliers", "drop_points"]
@@ -39,7 +39,12 @@ def find_outliers(P: np.ndarray, frames: Frames, dist: np.ndarray, near: np.ndar
     boundary triangles (angular gap near pi, height under 1.5 noise scales): indistinguishable
     here from a planted outlier lying in the tangent plane beyond the boundary.  With the
     points the reconstruction drops later, :func:`~jaxparam.points.reconstruct_surface`
-    reports 32 of its 11381 points as outliers (0.28 %; measured in session 10)."""
+    reports 32 of its 11381 points as outliers (0.28 %; measured in session 10).
+
+    With fewer than ``OUTLIER_MIN_NEIGHBOURS`` (8) neighbours per point (a set of at most 8
+    points) nothing is flagged: the neighbours' plane and noise scale mean nothing there."""
+    if near.shape[1] < OUTLIER_MIN_NEIGHBOURS:
+        return np.zeros(P.shape[0], bool)
     d4 = dist[:, :4].mean(1)
     high = (frames.height > scale * frames.noise) & (frames.height > height * frames.radius)
     iso = np.flatnonzero((d4 > isolation * _row_median(np.take(d4, near))) & ~high)

@@ -12,13 +12,13 @@ from scipy.spatial import cKDTree
 from .. import topology as topo
 from ..clock import StageClock
 from ..progress import StageBar
-from ..errors import PointCloudError
+from ..errors import PointCloudError, first_few
 from ..memory import reuse_freed_memory
 from ..mesh import TriMesh
 from ..topology import half_edge_twins
 from .boundary import detect_boundary
-from .defaults import (BRIDGE_FACTOR, FLIP_ROUNDS, GAP, K, K_DETECT, K_FRAME, MAX_SLOPE,
-                       OUTLIER_ROUNDS)
+from .defaults import (BRIDGE_FACTOR, CHORD_ROUNDS, FLIP_ROUNDS, GAP, K, K_DETECT, K_FRAME,
+                       MAX_SLOPE, OUTLIER_ROUNDS)
 from .graph import (Frames, global_frame, nearest_neighbours, point_graph_in_order, refresh_frames,
                     robust_frames, unreachable)
 from .outliers import drop_points, find_outliers
@@ -27,7 +27,8 @@ from .squeeze import SQUEEZED_SHARE, SqueezedMapWarning, squeeze_message, squeez
 from .meshless import (check_boundary_indices, check_map_options, check_points, map_points,
                        symmetric_solve)
 from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
-                            lone_points, long_faces, longest_edges, outside_bridges, peel_ears)
+                            lone_points, long_faces, longest_edges, onto_chords, outside_bridges,
+                            peel_ears)
 
 __all__ = ["Reconstruction", "reconstruct_surface"]
 
@@ -44,7 +45,9 @@ class Reconstruction:
     - ``uv (N, 2)``: the meshless map's parameter point of every input point (a merged
       duplicate has the UV of the point it repeats);
     - ``boundary (b,) int``: the boundary polygon the map used (detected or given), as
-      input indices in order (anticlockwise when detected);
+      input indices in order (anticlockwise when detected), with the interior points the map
+      put on one of its chords inserted there
+      (:func:`~jaxparam.points.triangulation.onto_chords`);
     - ``points_used (u,) int``: the input points the faces reference, increasing;
     - ``outliers (o,) int``: the input points found far from the surface their neighbours
       define (:func:`~jaxparam.points.outliers.find_outliers`), increasing; left out of the
@@ -96,10 +99,17 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     then the ears over boundary points the detection missed, and the largest manifold disk
     is kept.
 
+    An interior point that the map puts on a chord of the boundary polygon (a boundary point
+    the detection missed) would get a face of zero parameter area: it joins the polygon
+    between the chord's ends and the map is solved again.
+
     Scans: points far from the plane of their ``K_FRAME`` nearest neighbours are outliers
     (``outliers=True``): reported in ``rec.outliers``, left out of the mesh, the other points
-    keep their indices.  ``smooth`` moves the vertices onto a fitted surface to cut noise:
-    ``"mls"`` (a weighted quadratic height field over each point's robust tangent plane,
+    keep their indices.  The test needs ``OUTLIER_MIN_NEIGHBOURS`` (8) neighbours per point:
+    sets of at most 8 points keep all of theirs.  When the outliers leave ``k`` points or
+    fewer, each remaining point takes all the others as neighbours; when they leave fewer than
+    4, :class:`PointCloudError`.  ``smooth`` moves the vertices onto a fitted surface to cut
+    noise: ``"mls"`` (a weighted quadratic height field over each point's robust tangent plane,
     evaluated at the point) or ``"plane"`` (onto that plane); by default (``None``) the
     mesh's vertices are the input points, in their order.
 
@@ -169,10 +179,18 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
             bad = find_outliers(P, frames, dist[:, :K_FRAME], near[:, :K_FRAME]) & ~protect[order]
             if not bad.any():
                 break
+            left = len(P) - int(bad.sum())
+            if left < 4:
+                raise PointCloudError(
+                    "reconstruct_surface: the outlier test finds points "
+                    f"{first_few(np.sort(kept[order[bad]]))} far from the surface their "
+                    f"neighbours define, leaving {left} of the {n_in} points; a surface needs at "
+                    "least 4: the points may not sample a surface, or pass outliers=False to "
+                    "keep them all.")
             # Each outlier's neighbours, nearest first (input rows): its nearest kept point
             # is the first of them that stays (its UV below, without a tree over all points).
             gone.append((order[bad], order[near[bad]]))
-            keep_k = min(max(k, K_DETECT, K_FRAME), len(P) - 1 - int(bad.sum()))
+            keep_k = min(max(k, K_DETECT, K_FRAME), left - 1)
             sub, P, dist, near, changed = drop_points(P, dist, near, bad, keep_k)
             order = order[sub]
             # Only the points that lost a neighbour get new frames.
@@ -183,6 +201,9 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
             frames = robust_frames(P, near[:, :K_FRAME])
     elif smooth is not None:
         raise PointCloudError("reconstruct_surface: smooth needs k nearest neighbours, not radius.")
+    # The outliers gone, fewer than k + 1 points may remain (12 points, k = 10, two outliers):
+    # then every remaining point is a neighbour of every other.
+    k = min(k, len(P) - 1)
     where = np.full(len(P0), -1, np.int64)            # P0 row -> working index (-1: outlier)
     where[order] = np.arange(order.size)
     graph = point_graph_in_order(P, k, radius=radius, symmetric=symmetric, k_detect=K_DETECT,
@@ -203,8 +224,21 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
                                      max_slope=max_slope, names=kept[order],
                                      nearest=None if near is None else (dist, near),
                                      frames=None if near is None else frames, exempt=cut_off)
-    U = np.asarray(map_points(P, graph, bnd, weights=weights, boundary=boundary, spacing=spacing,
-                              symmetric=symmetric_solve(weights, symmetric, radius), host=True))
+    def solve(bnd):
+        sym = symmetric_solve(weights, symmetric, radius)
+        return np.asarray(map_points(P, graph, bnd, weights=weights, boundary=boundary,
+                                     spacing=spacing, symmetric=sym, host=True))
+
+    U = solve(bnd)
+    # Interior points the map put on a chord of the boundary polygon (Delaunay would give them
+    # a face of zero area over it): boundary points the detection missed; they join the
+    # polygon and the map is solved again.
+    for _ in range(CHORD_ROUNDS):
+        grown = onto_chords(U, bnd)
+        if grown is None:
+            break
+        bnd = grown
+        U = solve(bnd)
     mark("weights_and_solve")
     F = delaunay(U)
     F = F[np.argsort(F.min(axis=1), kind="stable")]     # faces in the points' (Morton) order too
