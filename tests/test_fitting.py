@@ -29,6 +29,7 @@ def test_spline_approximates_and_samples(mesh_uv):
     assert np.all(np.isfinite(np.asarray(patch.vertices)))
 
 
+@pytest.mark.slow          # 8 s; tests/test_cli.py checks the same on a generated vase
 def test_spline_stays_near_its_points_over_a_squeezed_map():
     # Held out (session 20): jaxparam fit of camelhead's circle map sampled a surface 1.2e7
     # across for a mesh 0.53 across, the plain least-squares spline swinging where the map
