@@ -1,6 +1,7 @@
 """Small point sets (the session-20 QA sweep): every call of the point pipeline either returns a
 valid result or raises :class:`PointCloudError`, never another exception; a point the map puts
 on a chord of the boundary polygon joins the boundary instead of leaving a zero-area face."""
+import json
 import warnings
 
 import numpy as np
@@ -210,3 +211,20 @@ def test_cli_closed_point_set_says_what_the_command_line_can_do(tmp_path, capsys
     assert main(["meshless", str(p), "-o", str(tmp_path / "s.obj"), "-q"]) == 3
     err = capsys.readouterr().err
     assert "on the command line, cut the surface open" in err and "boundary_indices=" in err
+
+
+def test_cli_warns_when_uniform_weights_collapse_triangles(tmp_path, capsys):
+    # Found in QA (session 20): uniform weights gave two interior points with the same
+    # neighbours (up to each other) one UV, and faces of area ~1e-16, with "0 flipped" only.
+    from jaxparam.cli import main
+    rng = np.random.default_rng(0)
+    n = int(rng.integers(8, 25))
+    p = tmp_path / "p.xyz"
+    np.savetxt(p, np.c_[rng.random((n, 2)), 0.05 * rng.standard_normal(n)])
+    for weights, warned in (("uniform", True), ("shape-preserving", False)):
+        rep = tmp_path / f"{weights}.json"
+        assert main(["meshless", str(p), "-o", str(tmp_path / "o.obj"), "--k", "4", "--weights",
+                     weights, "--report", str(rep), "-q"]) == 0
+        err = capsys.readouterr().err
+        assert ("triangles collapsed in the UVs" in err) == warned, err
+        assert (json.loads(rep.read_text())["collapsed"] > 0) == warned

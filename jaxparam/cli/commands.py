@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from .. import tol
 from ..clock import StageClock
 from ..errors import MeshFileError, PointCloudError
 from ..io import load, load_points, save
@@ -199,6 +200,13 @@ def cmd_meshless(args) -> int:
         "points": int(P.shape[0]), "points_used": used,
         "boundary_points": int(rec.boundary.size), "outliers": int(rec.outliers.size),
         "squeezed": rec.squeezed, "k": args.k, "weights": args.weights})
+    if rep["collapsed"]:
+        # uniform weights on a small, dense neighbour graph: two points with the same
+        # neighbours (up to each other) get one UV (session 20: 24 of 176 small random sets)
+        print(f"jaxparam meshless: warning: {rep['collapsed']} triangles collapsed in the UVs "
+              f"(aspect s1/s2 above {tol.COLLAPSED_ASPECT:.0e}: points mapped onto one place or "
+              "one line); use --weights shape-preserving (the default) or mean-value, or a "
+              "smaller --k", file=sys.stderr)
     return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
                   line=f"{args.output}: {P.shape[0]} points, {used} used, {mesh.n_faces} faces, "
                        f"{rep['flips']} flipped")
