@@ -324,12 +324,15 @@ def _lsq_coefficients(cols, vals, X, cols_c, vals_c, M: int, xp, penalty=None):
     if penalty is not None:
         smoothing, P = penalty
         scale = smoothing / float(np.trace(P))
-        _, info = sl.lapack.dpotrf(_Rows(cols_c, vals_c, M, np).gram()
-                                   + scale * float(np.sum(vals_c * vals_c)) * P, lower=1)
+        lamP_c = scale * float(np.sum(vals_c * vals_c)) * P
+        Lc, info = sl.lapack.dpotrf(_Rows(cols_c, vals_c, M, np).gram() + lamP_c, lower=1)
         if info == 0:             # else the parameters fix no bilinear function: as below
             B = _Rows(cols, vals, M, xp)
-            lamP = scale * xp.sum(vals * vals) * xp.asarray(P)
-            cf = lin.cho_factor(B.gram() + lamP, lower=True)
+            if xp is np and vals is vals_c:
+                lamP, cf = lamP_c, (Lc, True)          # the check's factor is this matrix's
+            else:
+                lamP = scale * xp.sum(vals * vals) * xp.asarray(P)
+                cf = lin.cho_factor(B.gram() + lamP, lower=True)
             Z = lin.cho_solve(cf, B.rmv(X))
             for _ in range(3):    # refinement: the normal matrix's condition is ~1e10 here
                 Z = Z + lin.cho_solve(cf, B.rmv(X - B.mv(Z)) - lamP @ Z)

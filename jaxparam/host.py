@@ -18,7 +18,7 @@ from . import tol
 
 __all__ = ["safe_norm", "corner_geometry",  "weights_from_angles", "shape_preserving_weights",
            "frame_coordinates", "face_quantities", "circle", "signed_areas", "face_areas",
-           "vertex_normals", "collapsed_faces"]
+           "vertex_normals", "map_aspects", "collapsed_faces"]
 
 
 def safe_norm(x, axis=-1):
@@ -158,18 +158,22 @@ def face_quantities(V, F, uv) -> dict:
     return {"J": J, "s1": Qs + R, "s2": Qs - R, "area3d": 0.5 * safe_norm(n), "area_uv": area_uv}
 
 
-def collapsed_faces(V, F, uv, quantities: dict | None = None) -> np.ndarray:
-    """``(m,) bool``: the faces whose UV triangle is positive but collapsed, its map's aspect
-    ``s1 / s2`` above :data:`jaxparam.tol.COLLAPSED_ASPECT` (``V (n, 3)``, ``F (m, 3)``, ``uv (n,
-    2)``; ``quantities``: their :func:`face_quantities` when already computed).
-    ``s1 / s2 = s1^2 / det J`` (``s2 = s1 - 2R`` cancels at such aspects).  Flipped, degenerate
-    and non-finite faces are not counted here (:func:`jaxparam.metrics.flips` counts them)."""
-    q = quantities if quantities is not None else face_quantities(
-        np.asarray(V, np.float64), np.asarray(F), np.asarray(uv, np.float64))
+def map_aspects(q: dict) -> np.ndarray:
+    """``(m,)``: each face's map aspect ``s1 / s2`` from its :func:`face_quantities` ``q``, as
+    ``s1^2 / det J`` (``s2 = s1 - 2R`` cancels at large aspects); ``nan`` where the UV triangle
+    is not positive (flipped, degenerate or not finite: :func:`jaxparam.metrics.flips` counts
+    those)."""
     J, s1 = q["J"], q["s1"]
     det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-    with np.errstate(invalid="ignore", over="ignore"):
-        return (q["area_uv"] > 0) & (s1 * s1 > tol.COLLAPSED_ASPECT * det)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        return np.where(q["area_uv"] > 0, s1 * s1 / det, np.nan)
+
+
+def collapsed_faces(q: dict) -> np.ndarray:
+    """``(m,) bool``: the faces (their :func:`face_quantities` ``q``) whose UV triangle is
+    positive but collapsed, its :func:`map_aspects` above :data:`jaxparam.tol.COLLAPSED_ASPECT`."""
+    with np.errstate(invalid="ignore"):
+        return map_aspects(q) > tol.COLLAPSED_ASPECT
 
 
 def _safe_sqrt(x):

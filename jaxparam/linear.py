@@ -23,6 +23,7 @@ from .errors import MeshError, SolverError, first_few
 from .mesh import TriMesh
 from .io import as_mesh
 from .options import choose
+from .triangles import face_angles
 
 __all__ = ["InteriorSystem", "interior_system", "solve_interior", "convex_map",
            "least_squares_map", "fill_holes", "disk_check"]
@@ -186,13 +187,8 @@ def convex_map(mesh: TriMesh, *, weights: str = "shape_preserving", boundary="ci
 def _needle_hint(mesh: TriMesh) -> str:
     """Why harmonic weights may leave a system singular: the triangle whose smallest angle is
     the smallest (its cotangent, unbounded there), and what to do."""
-    V = np.asarray(mesh.vertices, np.float64)
     F = np.asarray(mesh.faces)
-    P = V[F]
-    ang = np.empty(F.shape)
-    for c in range(3):
-        a, b = P[:, (c + 1) % 3] - P[:, c], P[:, (c + 2) % 3] - P[:, c]
-        ang[:, c] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+    ang = face_angles(np.asarray(mesh.vertices, np.float64), F)
     f = int(np.argmin(ang.min(1)))
     t = float(ang[f].min())
     return (f"Harmonic (cotangent) weights are unbounded on needle triangles, and face {f} "

@@ -303,7 +303,7 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
         # A face with a non-finite UV corner is no triangle: flipped and degenerate both.
         vertices=t.n_vertices, faces=t.n_faces, flips=int(np.sum(~(auv > 0))),
         degenerate=int(np.sum((auv == 0) | ~np.isfinite(auv))),
-        collapsed=int(np.sum(host.collapsed_faces(None, None, None, fd))),
+        collapsed=int(np.sum(host.collapsed_faces(fd))),
         boundary_overlaps=boundary_overlaps(mesh, uv),
         sym_dirichlet=sd, mips=mips, max_aspect=aspect, angle_distortion=float(ang),
         area_distortion=area_d, unreferenced_vertices=int((~t.referenced).sum()), theorem1=cert)

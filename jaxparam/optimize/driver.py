@@ -14,7 +14,7 @@ from .. import energies as en_mod
 from .. import geometry as geo
 from .. import metrics
 from .. import tol
-from ..host import (collapsed_faces, face_areas as host_face_areas, face_quantities,
+from ..host import (face_areas as host_face_areas, face_quantities, map_aspects,
                     signed_areas as host_signed_areas)
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
@@ -75,15 +75,16 @@ def check_start(mesh, uv0, where: str = "minimize") -> None:
 
 def warn_collapsed(mesh, uv: np.ndarray, energy: str, where: str = "minimize",
                    stacklevel: int = 3) -> int:
-    """The number of collapsed faces of ``uv (n, 2)`` (:func:`jaxparam.host.collapsed_faces`),
-    warning :class:`CollapsedMapWarning` when there are any."""
+    """The number of collapsed faces of ``uv (n, 2)`` (:func:`jaxparam.host.map_aspects` above
+    :data:`jaxparam.tol.COLLAPSED_ASPECT`), warning :class:`CollapsedMapWarning` when there
+    are any."""
     F = np.asarray(mesh.faces)
-    V = np.asarray(mesh.vertices, np.float64)
-    bad = np.flatnonzero(collapsed_faces(V, F, uv))
+    aspect = map_aspects(face_quantities(np.asarray(mesh.vertices, np.float64), F,
+                                         np.asarray(uv, np.float64)))
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(aspect > tol.COLLAPSED_ASPECT)
     if bad.size:
-        q = face_quantities(V, F[bad], np.nan_to_num(uv))
-        J = q["J"]
-        worst = float(np.max(q["s1"] ** 2 / (J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0])))
+        worst = float(np.max(aspect[bad]))
         warnings.warn(
             f"{where}: {bad.size} of {F.shape[0]} triangles collapsed in the UVs (not flipped, "
             f"but of aspect s1/s2 above {tol.COLLAPSED_ASPECT:.0e}, up to {worst:.2g}; first: "
@@ -302,16 +303,13 @@ def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, stric
     run = runs.close()
     if run is not None:       # the forward callback ran once, now (an eager jax.grad)
         res = run.result
-        overlaps = 0
-        if free_boundary:
-            uvh = np.array(run.problem.uv(res.x))
-            uvh[~mesh.topology.referenced] = np.nan
-            overlaps = metrics.boundary_overlaps(mesh, uvh)
+        uvh = np.array(run.problem.uv(res.x))
+        uvh[~mesh.topology.referenced] = np.nan
+        overlaps = metrics.boundary_overlaps(mesh, uvh) if free_boundary else 0
         return MinimizeResult(uv=uv, energy=res.energy, iterations=res.iterations,
                               converged=res.converged, history=res.history, seconds=res.seconds,
                               reason=res.reason, flips=run.flips, boundary_overlaps=overlaps,
-                              collapsed=warn_collapsed(run.problem.mesh, np.array(
-                                  run.problem.uv(res.x)), en.name, stacklevel=4),
+                              collapsed=warn_collapsed(run.problem.mesh, uvh, en.name, stacklevel=4),
                               solver=solver.name, times=res.times)
     # under jax.jit (the callback has not run yet) or jax.vmap (it ran once per element)
     return MinimizeResult(uv=uv, energy=info.energy, iterations=info.iterations,
