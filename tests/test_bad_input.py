@@ -107,6 +107,31 @@ def test_user_weights_of_wrong_sign(grid_mesh):
         jp.least_squares_map(grid_mesh, mu=np.ones(3))
 
 
+def _binary_ply(faces: int, tail: bytes = b"") -> bytes:
+    """A little-endian PLY of 4 vertices and 2 triangles whose header promises ``faces``."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], "<f4")
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+            "property float y\nproperty float z\nelement face %d\n"
+            "property list uchar int vertex_indices\nend_header\n" % faces).encode()
+    tri = [np.array([3], "<u1").tobytes() + np.array(f, "<i4").tobytes() for f in ([0, 1, 2], [1, 3, 2])]
+    return head + V.tobytes() + b"".join(tri) + tail
+
+
+# Found in QA (session 20): a binary PLY whose header promises fewer faces than it holds lost
+# the rest silently.
+@pytest.mark.parametrize("target", ["mesh", "points"])
+def test_binary_ply_with_data_after_the_promised_elements(tmp_path, target):
+    p = tmp_path / "lessb.ply"
+    p.write_bytes(_binary_ply(1))
+    load = jp.load if target == "mesh" else jp.load_points
+    with pytest.raises(MeshFileError, match=r"lessb\.ply, byte 230: binary data goes on after the 1 "
+                       r"face elements the header promises: 13 more bytes .*fix the count in the "
+                       r"header \(line 7: 'element face 1'\) or cut the file at byte 230"):
+        load(p)
+    p.write_bytes(_binary_ply(2, b"\r\n"))       # a line end after the data is harmless
+    assert load(p).shape[0] == 4 if target == "points" else load(p).n_faces == 2
+
+
 @pytest.mark.parametrize("name, content, match", [
     ("trunc.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", r"line 4: index 4 .*only 3"),
     ("counts.off", b"OFF\n5 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", r"promises 5 vertices and 2 faces .*truncated"),

@@ -190,7 +190,8 @@ def read_elements_located(path):
     ``{element: (count,) file line of each row}`` (``None`` for a binary file).
 
     Raises :class:`MeshFileError` when an ASCII file has data lines after the last element
-    the header declares (its count is too small), naming the line where they start; that
+    the header declares (its count is too small), naming the line where they start, or a
+    binary file has bytes other than white space after it, naming the byte offset; that
     error has ``complete = True`` (:func:`read_ply` passes its message on as it is).
     """
     p = existing_file(path)
@@ -222,6 +223,17 @@ def read_elements_located(path):
     order = "<" if fmt == "binary_little_endian" else ">"
     for name, count, props in elements:
         out[name], pos = _binary_element(data, pos, name, count, props, order, path)
+    if data[pos:].strip(b" \t\r\n") and elements:
+        name, count, _ = elements[-1]
+        decl_line, decl = declared[name]
+        extra = len(data) - pos
+        exc = MeshFileError(
+            f"{path}, byte {pos}: binary data goes on after the {count} {name} elements the "
+            f"header promises: {extra} more byte{'s' if extra != 1 else ''} to the end of the "
+            f"file; fix the count in the header (line {decl_line}: {decl!r}) or cut the file "
+            f"at byte {pos}.")
+        exc.complete = True
+        raise exc
     return out, None
 
 

@@ -26,8 +26,8 @@ def load_points(path) -> np.ndarray:
 
     Text files (any other extension, e.g. ``.csv``, is read as text too) take one point a
     line, the first three numbers (separated by blanks or commas; ``#`` starts a comment);
-    ``.npy`` holds an ``(N, 3)`` array; a ``.ply`` file's vertices are read with ``trimesh``
-    (faces ignored).  Units are the file's.
+    ``.npy`` holds an ``(N, 3)`` array; a ``.ply`` file's vertices are read by :mod:`.ply`
+    (ASCII or binary; faces ignored).  Units are the file's.
 
     Raises :class:`MeshFileError` for a missing or malformed file (with the line), an
     array that is not ``(N, 3)``, and a file of another kind: a mesh (``.obj``, ``.off``,
@@ -48,11 +48,7 @@ def load_points(path) -> np.ndarray:
         except Exception as exc:
             raise MeshFileError(f"{path}: not a readable .npy array ({exc}).") from None
     elif ext == ".ply":
-        try:
-            import trimesh
-            P = np.asarray(trimesh.load(str(p), process=False).vertices)
-        except Exception as exc:
-            raise MeshFileError(f"{path}: cannot read the PLY file ({type(exc).__name__}: {exc}).") from None
+        P = _read_ply_points(path)
     else:
         _refuse_other_kinds(p, path, ext)
         P = _read_xyz(p, path)
@@ -60,6 +56,23 @@ def load_points(path) -> np.ndarray:
     if P.ndim != 2 or P.shape[1] != 3:
         raise MeshFileError(f"{path}: expected an (N, 3) array of points, got shape {P.shape}.")
     return P
+
+
+def _read_ply_points(path) -> np.ndarray:
+    """The ``(N, 3)`` vertex positions of a PLY file (ASCII or binary, points or a mesh), read
+    by :mod:`.ply`: a header that does not match the data is refused with the place."""
+    from .ply import read_elements
+    try:
+        vertex = read_elements(path).get("vertex")
+    except MeshFileError:
+        raise
+    except Exception as exc:
+        raise MeshFileError(f"{path}: cannot read the PLY file ({type(exc).__name__}: {exc}); "
+                            "check the format and that the file is complete.") from None
+    if vertex is None or not all(c in vertex for c in "xyz"):
+        raise MeshFileError(f"{path}: the PLY file has no vertex element with x, y and z "
+                            "properties; points are read from the vertices' x y z.")
+    return np.stack([np.asarray(vertex[c], np.float64) for c in "xyz"], axis=1)
 
 
 def _mesh_file(path, what: str, rename: str | None = None) -> MeshFileError:
