@@ -18,6 +18,7 @@ Usage::
     python benchmarks/points.py --sizes 10000 100000 1000000
     python benchmarks/points.py --peers [--n 20000]
     python benchmarks/points.py --sweep [--n 20000]
+    python benchmarks/points.py --holes [--n 8000]
 
 ``JAXPARAM_BENCH_FACES=PREFIX`` saves each size's faces to ``PREFIX_<n>.npy`` (before/after
 comparisons); the ``cpu`` columns are process CPU seconds (all threads) of the same calls.
@@ -25,6 +26,12 @@ comparisons); the ``cpu`` columns are process CPU seconds (all threads) of the s
 ``--sweep`` prints jaxparam's own table over the same four meshes and five kinds of set
 (noise 0.1 and 0.2 % of the diagonal per axis, eightfold density, 1 % outliers, all of these),
 with the issue's goal checked per row.
+
+``--holes`` cuts round holes into the same four meshes (every face within a radius of 4 or 8 %
+of the diagonal of a vertex far from the boundary, one or two holes), samples the cut mesh as
+``--sweep`` does (clean, ``noise2``, ``dens8``, ``all``), and reconstructs with ``holes=True``
+(the default) and ``holes=False``: boundary loops (the source has 1 + holes) and both
+distances to the cut mesh.
 """
 from __future__ import annotations
 
@@ -70,11 +77,12 @@ def run(n: int) -> dict:
 PEER_MESHES = {"camelhead": "off", "lilium": "obj", "snail": "obj", "bump-domain": "obj"}
 
 
-def scan_set(name: str, kind: str, n: int, seed: int = 0):
+def scan_set(name: str, kind: str, n: int, seed: int = 0, holes: int = 0, radius: float = 0.0):
     """``(points, V, F, diag, outliers)``: ``n`` area-weighted samples of a shared mesh;
     ``kind`` is ``noise1`` / ``noise2`` (Gaussian, 0.1 / 0.2 % of the diagonal per axis),
     ``dens8`` (density rising eightfold along the longest axis), ``out1`` (1 % outliers on
-    clean samples) or ``all`` (0.2 % noise, eightfold density and 1 % outliers)."""
+    clean samples) or ``all`` (0.2 % noise, eightfold density and 1 % outliers).  ``holes``
+    round holes of ``radius`` (share of the diagonal) are cut first (:func:`cut_holes`)."""
     import igl
     from pathlib import Path
 
@@ -82,9 +90,11 @@ def scan_set(name: str, kind: str, n: int, seed: int = 0):
     src = jp.load(str(Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "meshes"
                       / f"{name}.{PEER_MESHES[name]}"))
     V, F = np.asarray(src.vertices), np.asarray(src.faces)
+    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
+    if holes:
+        F = cut_holes(V, F, holes, radius * diag, seed)
     rng = np.random.default_rng(seed)
     P = surface_samples(V, F, 8 * n, rng)
-    diag = float(np.linalg.norm(np.ptp(V, axis=0)))
     if kind in ("dens8", "all"):
         ax = int(np.argmax(np.ptp(V, axis=0)))
         t = (P[:, ax] - V[:, ax].min()) / np.ptp(V[:, ax])
@@ -101,6 +111,27 @@ def scan_set(name: str, kind: str, n: int, seed: int = 0):
             P[out[todo]] = base[todo] + d / np.linalg.norm(d, axis=1, keepdims=True) * amp[todo]
             todo = todo[np.sqrt(igl.point_mesh_squared_distance(P[out[todo]], V, F)[0]) < 0.015 * diag]
     return P, V, F, diag, out
+
+
+def cut_holes(V, F, holes: int, radius: float, seed: int = 0) -> np.ndarray:
+    """The faces ``F`` less those with a vertex within ``radius`` of ``holes`` centres: mesh
+    vertices at least ``3 radius`` from the boundary and ``3 radius`` from each other."""
+    import jaxparam as jp
+    t = jp.TriMesh(V, F).topology
+    bnd = V[np.concatenate(t.boundary_loops)]
+    from scipy.spatial import cKDTree
+    far = np.flatnonzero(cKDTree(bnd).query(V)[0] > 3 * radius)
+    rng = np.random.default_rng(seed + 1)
+    centres = []
+    for i in rng.permutation(far):
+        if all(np.linalg.norm(V[i] - c) > 3 * radius for c in centres):
+            centres.append(V[i])
+        if len(centres) == holes:
+            break
+    near = np.zeros(len(V), bool)
+    for c in centres:
+        near |= np.linalg.norm(V - c, axis=1) < radius
+    return F[~near[F].any(1)]
 
 
 def surface_samples(V, F, n, rng):
@@ -264,6 +295,33 @@ def sweep_table(n: int) -> None:
                   flush=True)
 
 
+def holes_table(n: int) -> None:
+    """``holes=True`` against ``holes=False`` on the four meshes with holes cut into them."""
+    import warnings
+    import jaxparam as jp
+    print(f"{n} points per set; the source has 1 + holes boundary loops; distances % of the diagonal")
+    print(f"{'set':>30s} {'holes':>6s} {'loops':>6s} {'used':>6s} {'flips':>6s} "
+          f"{'faces->surf %':>14s} {'surf->faces %':>14s} {'seconds':>8s}")
+    for name in PEER_MESHES:
+        for holes, radius in ((1, 0.04), (2, 0.04), (1, 0.08)):
+            for kind in ("clean", "noise2", "dens8", "all"):
+                P, V, F, diag, out = scan_set(name, kind, n, holes=holes, radius=radius)
+                for opt in (True, False):
+                    t = time.perf_counter()
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        rec = jp.reconstruct_surface(P, holes=opt, verbose=False)
+                    sec = time.perf_counter() - t
+                    FR = np.asarray(rec.mesh.faces)
+                    inl = np.setdiff1d(np.arange(len(P)), out)
+                    used = np.isin(inl, rec.points_used).mean()
+                    _, loops, _, d1, d2 = mesh_stats(P, np.asarray(rec.mesh.vertices), FR, V, F, diag)
+                    flips = int(jp.distortion(rec.mesh, rec.uv).flips)
+                    label = f"{name} {kind} {holes}x{100 * radius:.0f}%"
+                    print(f"{label:>30s} {str(opt):>6s} {loops:6d} {used:6.3f} {flips:6d} {d1:14.2f} "
+                          f"{d2:14.2f} {sec:8.1f}", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", type=int, nargs="*", default=[10_000, 100_000, 1_000_000])
@@ -271,8 +329,13 @@ def main() -> int:
     ap.add_argument("--peers", action="store_true", help="the peer table on scan-like sets")
     ap.add_argument("--sweep", action="store_true",
                     help="jaxparam on every shared disk mesh x noise 0.1/0.2 %%, 8x density, 1 %% outliers")
+    ap.add_argument("--holes", action="store_true",
+                    help="holes=True against holes=False on the shared disk meshes with holes cut")
     ap.add_argument("--n", type=int, default=20_000, help="points per set of the peer table")
     args = ap.parse_args()
+    if args.holes:
+        holes_table(args.n)
+        return 0
     if args.sweep:
         sweep_table(args.n)
         return 0

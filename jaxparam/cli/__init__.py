@@ -101,6 +101,10 @@ def _add_meshless(sub) -> None:
                    default=default_of(reconstruct_surface, "merge_duplicates"),
                    help="keep one of each set of equal points (scans often repeat points); the "
                         "copies get their first's UV and stay out of the faces")
+    p.add_argument("--no-holes", dest="holes", action="store_false",
+                   default=default_of(reconstruct_surface, "holes"),
+                   help="bridge the holes of the scan with long triangles (a disk) instead of "
+                        "leaving them open")
 
 
 def _add_fit(sub) -> None:

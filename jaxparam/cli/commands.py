@@ -178,7 +178,7 @@ def cmd_meshless(args) -> int:
     try:
         rec = reconstruct_surface(P, k=args.k, weights=canonical(args.weights),
                                   boundary=canonical(args.boundary),
-                                  merge_duplicates=args.merge_duplicates)
+                                  merge_duplicates=args.merge_duplicates, holes=args.holes)
     except PointCloudError as exc:
         if "boundary=indices" in str(exc):
             # options of the Python API that the command line has not
@@ -199,7 +199,7 @@ def cmd_meshless(args) -> int:
     rep = report_dict(mesh, rec.uv, seconds=clock, extra={
         "points": int(P.shape[0]), "points_used": used,
         "boundary_points": int(rec.boundary.size), "outliers": int(rec.outliers.size),
-        "squeezed": rec.squeezed, "k": args.k, "weights": args.weights})
+        "squeezed": rec.squeezed, "holes": rec.holes, "k": args.k, "weights": args.weights})
     if rep["collapsed"]:
         # uniform weights on a small, dense neighbour graph: two points with the same
         # neighbours (up to each other) get one UV (session 20: 24 of 176 small random sets)
@@ -209,7 +209,7 @@ def cmd_meshless(args) -> int:
               "smaller --k", file=sys.stderr)
     return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
                   line=f"{args.output}: {P.shape[0]} points, {used} used, {mesh.n_faces} faces, "
-                       f"{rep['flips']} flipped")
+                       f"{rec.holes} hole{'s' if rec.holes != 1 else ''}, {rep['flips']} flipped")
 
 
 def cmd_fit(args) -> int:

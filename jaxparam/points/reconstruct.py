@@ -17,8 +17,9 @@ from ..memory import reuse_freed_memory
 from ..mesh import TriMesh
 from ..topology import half_edge_twins
 from .boundary import detect_boundary
-from .defaults import (BRIDGE_FACTOR, CHORD_ROUNDS, FLIP_ROUNDS, GAP, K, K_DETECT, K_FRAME,
-                       MAX_SLOPE, OUTLIER_ROUNDS)
+from .defaults import (BRIDGE_FACTOR, CHORD_ROUNDS, FLIP_ROUNDS, GAP, HOLE_FACES, HOLE_INRADIUS,
+                       HOLE_SHARE, K, K_DETECT,
+                       K_FRAME, MAX_SLOPE, OUTLIER_ROUNDS)
 from .graph import (Frames, global_frame, nearest_neighbours, point_graph_in_order, refresh_frames,
                     robust_frames, unreachable)
 from .outliers import drop_points, find_outliers
@@ -27,7 +28,8 @@ from .squeeze import SQUEEZED_SHARE, SqueezedMapWarning, squeeze_message, squeez
 from .meshless import (check_boundary_indices, check_map_options, check_points, map_points,
                        symmetric_solve)
 from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
-                            lone_points, long_faces, longest_edges, onto_chords, outside_bridges,
+                            interior_holes, lone_points, long_faces, longest_edges, onto_chords,
+                            outside_bridges,
                             peel_ears)
 
 __all__ = ["Reconstruction", "reconstruct_surface"]
@@ -59,7 +61,9 @@ class Reconstruction:
     - ``squeezed``: the share of the map's Delaunay triangles whose share of the parameter
       domain is below 1/1000 of their share of the 3D area (:mod:`~jaxparam.points.squeeze`);
       above 0.2 a :class:`~jaxparam.points.squeeze.SqueezedMapWarning` says the points seem
-      to sample a closed surface (open scans measured 0-0.12, closed ones 0.30-0.99).
+      to sample a closed surface (open scans measured 0-0.12, closed ones 0.30-0.99);
+    - ``holes``: the holes of the mesh (its boundary loops less the outer one), opened where
+      the scan has holes (``reconstruct_surface(..., holes=True)``, the default).
 
     Example::
 
@@ -74,6 +78,7 @@ class Reconstruction:
     seconds: dict
     outliers: np.ndarray
     squeezed: float
+    holes: int
 
 
 def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving",
@@ -82,7 +87,7 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
                         symmetric: bool = True, gap: float = GAP, merge_duplicates: bool = False,
                         max_slope: float = MAX_SLOPE, bridge_factor: float = BRIDGE_FACTOR,
                         flip_rounds: int = FLIP_ROUNDS, outliers: bool = True,
-                        smooth: str | None = None, verbose: bool | None = None,
+                        holes: bool = True, smooth: str | None = None, verbose: bool | None = None,
                         **unknown) -> Reconstruction:
     """Triangulate unorganized points ``(N, 3)`` through their meshless parameterization (§8).
 
@@ -97,7 +102,11 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     off).  Triangles on the outside whose longest 3D edge exceeds ``bridge_factor`` times
     the local point spacing (they bridge concave parts of the boundary) are peeled off,
     then the ears over boundary points the detection missed, and the largest manifold disk
-    is kept.
+    is kept.  ``holes``: such long faces inside the surface open a hole where they span an
+    empty disk whose edge points see an angular gap larger than ``gap`` (a hole in the scan:
+    :func:`~jaxparam.points.triangulation.interior_holes` with ``HOLE_SHARE``,
+    ``HOLE_INRADIUS`` and ``HOLE_FACES``); the mesh is then a disk with holes, its UVs still
+    one-to-one (``holes=False`` bridges them, as a disk).
 
     An interior point that the map puts on a chord of the boundary polygon (a boundary point
     the detection missed) would get a face of zero parameter area: it joins the polygon
@@ -141,11 +150,12 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
                             boundary=boundary, spacing=spacing, gap=gap, user_bnd=boundary_indices,
                             merge=merge_duplicates, max_slope=max_slope,
                             bridge_factor=bridge_factor, flip_rounds=flip_rounds,
-                            outliers=outliers, smooth=smooth, verbose=verbose)
+                            outliers=outliers, holes=holes, smooth=smooth, verbose=verbose)
 
 
 def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, gap, user_bnd, merge,
-                 max_slope, bridge_factor, flip_rounds, outliers, smooth, verbose) -> Reconstruction:
+                 max_slope, bridge_factor, flip_rounds, outliers, holes, smooth,
+                 verbose) -> Reconstruction:
     clock = StageClock()
     mark = StageBar(clock, total=6, desc="reconstruct_surface", verbose=verbose)
     P0, kept, index, perm = check_points(points, k=k, merge_duplicates=merge, return_index=True,
@@ -269,6 +279,10 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     # Peel in one pass: the too-long faces connected to the outside through too-long faces.
     twin = half_edge_twins(F, len(P)) if twin is None else twin
     keep = ~outside_bridges(F, too_long, len(P), twin=twin)
+    if holes and graph.detect_gap is not None:
+        keep &= ~interior_holes(F, P, too_long & keep, graph.detect_gap > gap, graph.spacing,
+                                share=HOLE_SHARE, inradius=HOLE_INRADIUS, faces=HOLE_FACES,
+                                twin=twin)
     keep = peel_ears(F, P, graph, twin=twin, alive=keep, return_mask=True)
     name = kept[order]                                   # working index -> input index
     dropped = np.flatnonzero(where < 0)                  # outliers, as rows of P0 (not mapped)
@@ -296,7 +310,7 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     return Reconstruction(mesh=mesh, uv=uv, boundary=name[bnd],
                           points_used=np.flatnonzero(topology.referenced), seconds=clock.seconds,
                           outliers=np.sort(np.concatenate([kept[dropped], name[late]])),
-                          squeezed=squeezed)
+                          squeezed=squeezed, holes=max(len(topology.boundary_loops) - 1, 0))
 
 
 def _nearest_kept(P: np.ndarray, P0: np.ndarray, dropped: np.ndarray, where: np.ndarray,

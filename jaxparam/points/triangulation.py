@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import Delaunay
 
 from .. import topology as topo
@@ -16,7 +16,7 @@ from .defaults import CHORD_ROUNDS, CHORD_TOL, EAR_MAX_BASE
 from .graph import PointGraph
 
 __all__ = ["delaunay", "onto_chords", "flip_towards_3d_delaunay", "longest_edges", "long_faces",
-           "lone_points", "outside_bridges", "peel_ears", "largest_manifold_disk"]
+           "lone_points", "outside_bridges", "interior_holes", "peel_ears", "largest_manifold_disk"]
 
 
 def delaunay(U: np.ndarray) -> np.ndarray:
@@ -286,6 +286,52 @@ def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int, *,
     mask = np.zeros(m + 1, bool)
     mask[reached] = True
     return mask[:m]
+
+
+def interior_holes(F: np.ndarray, P: np.ndarray, bad: np.ndarray, rim: np.ndarray,
+                   spacing: np.ndarray, *, share: float, inradius: float, faces: int,
+                   twin: np.ndarray | None = None) -> np.ndarray:
+    """``(m,) bool``: the faces flagged ``bad (m,) bool`` (too long, and not peeled from the
+    outside) that span a hole inside the sampled surface.
+
+    The bad faces fall into groups joined by edges.  A group spans a hole when it has at
+    least ``faces`` faces, at least ``share`` of its vertices are ``rim (N,) bool`` points
+    (an angular gap in their neighbourhood: the hole's edge), and its fattest face's 3D
+    inradius is at least ``inradius`` times the median ``spacing (N,)`` of the group's
+    vertices (an empty disk, not a sliver: long thin faces across a crease, or where two
+    sheets of the surface lie close, have vertices that see neighbours all around, and the
+    faces next to an outlier or a sparse patch are thin).  ``F (m, 3)`` manifold over the
+    points ``P (N, 3)``; ``twin`` its :func:`~jaxparam.topology.half_edge_twins`, if known."""
+    m, n = len(F), len(P)
+    if not bad.any():
+        return np.zeros(m, bool)
+    twin = half_edge_twins(F, n) if twin is None else twin
+    h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
+    a, b = h // 3, twin[h] // 3
+    both = bad[a] & bad[b]
+    G = sp.csr_matrix((np.ones(2 * int(both.sum())), (np.r_[a[both], b[both]], np.r_[b[both], a[both]])),
+                      shape=(m, m))
+    _, label = connected_components(G, directed=False)
+    ids = np.flatnonzero(bad)
+    group = label[ids]
+    # Each group's distinct vertices: how many, how many on a rim, their median spacing.
+    pairs = np.unique(np.c_[np.repeat(group, 3), F[ids].reshape(-1)], axis=0)
+    total = np.bincount(pairs[:, 0], minlength=m)
+    on_rim = np.bincount(pairs[:, 0], weights=rim[pairs[:, 1]], minlength=m)
+    order = np.lexsort((spacing[pairs[:, 1]], pairs[:, 0]))
+    first = np.searchsorted(pairs[order, 0], np.arange(m))
+    median = np.zeros(m)
+    has = total > 0
+    median[has] = spacing[pairs[order, 1]][first[has] + (total[has] - 1) // 2]
+    # The fattest face of each group: inradius = 2 area / perimeter.
+    X = P[F[ids]]
+    e = np.linalg.norm(X - np.roll(X, -1, axis=1), axis=2)
+    area2 = np.linalg.norm(np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), axis=1)
+    fattest = np.zeros(m)
+    np.maximum.at(fattest, group, area2 / np.maximum(e.sum(1), 1e-300))
+    count = np.bincount(group, minlength=m)
+    hole = (count >= faces) & (on_rim >= share * np.maximum(total, 1)) & (fattest >= inradius * median)
+    return bad & hole[label]
 
 
 def largest_manifold_disk(F: np.ndarray, n: int, *, max_rounds: int = 50,
