@@ -565,6 +565,34 @@ def test_collapsed_triangles_are_counted_and_warned():
     assert res.collapsed == 0 and jp.distortion(vase, res.uv).collapsed == 0
 
 
+def _ramp(nr: int = 4, nt: int = 80, turns: float = 1.3, c: float = 0.05) -> jp.TriMesh:
+    """A strip winding ``turns`` times round the z axis and slowly rising (a spiral ramp):
+    its nearly isometric flattening winds more than once, so it overlaps itself."""
+    r, t = np.linspace(1.0, 1.6, nr), np.linspace(0, 2 * np.pi * turns, nt)
+    R, T = np.meshgrid(r, t, indexing="ij")
+    V = np.c_[(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel(), (c * T).ravel()]
+    i = np.arange(nr * nt).reshape(nr, nt)
+    a, b, cc, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
+    return jp.TriMesh(V, np.r_[np.c_[a, b, cc], np.c_[a, cc, d]])
+
+
+# Found in QA (session 21): a free boundary that swung round onto itself was returned with
+# "0 flipped" and no word (the report's boundary_overlaps only).
+def test_a_free_boundary_that_crosses_itself_is_warned():
+    import warnings
+
+    from jaxparam.optimize import BoundaryOverlapWarning
+    ramp = _ramp()
+    with pytest.warns(BoundaryOverlapWarning, match=r"the free boundary crosses itself \(\d+ pairs "
+                      r"of boundary edges; first: \(\d+, \d+\) and \(\d+, \d+\)\).*jp\.atlas"):
+        res = jp.minimize(ramp, "symmetric_dirichlet", free_boundary=True, verbose=False)
+    assert res.flips == 0 and res.boundary_overlaps == jp.metrics.boundary_overlaps(ramp, res.uv) > 0
+    with warnings.catch_warnings():           # the fixed circle cannot cross itself: no warning
+        warnings.simplefilter("error", BoundaryOverlapWarning)
+        res = jp.minimize(ramp, "symmetric_dirichlet", verbose=False, max_iters=5)
+    assert res.boundary_overlaps == 0
+
+
 def test_collapsed_count_under_jit_equals_the_host_one():
     vase = _vase(40, 4)         # its fixed-boundary ARAP optimum collapses a ring
     F = vase.faces

@@ -39,7 +39,7 @@ jitted kernels, Hessian pattern), ``base`` (stopping rules, results, the host lo
 ``search`` (flip-free Armijo), ``implicit`` (implicit gradients), ``solvers`` (the
 registry).
 """
-from .base import (CollapsedMapWarning, HostLoopSolver, SolveResult, Solver, StopRules,
+from .base import (BoundaryOverlapWarning, CollapsedMapWarning, HostLoopSolver, SolveResult, Solver, StopRules,
                    UnconvergedGradientWarning)
 from .driver import MinimizeResult, minimize
 from .newton import Newton
@@ -50,4 +50,4 @@ from .solvers import SOLVERS, solver_from
 __all__ = ["MinimizeResult", "minimize", "SOLVERS", "FlipFreeDescent", "Solver",
            "HostLoopSolver", "SolveResult", "StopRules", "Problem", "Newton", "LBFGS", "BFGS",
            "JaxoptLBFGS", "OptimistixSolver", "solver_from", "UnconvergedGradientWarning",
-           "CollapsedMapWarning"]
+           "CollapsedMapWarning", "BoundaryOverlapWarning"]

@@ -21,7 +21,7 @@ from .problem import Problem
 
 __all__ = ["StopRules", "SolveResult", "Step", "Solver", "HostLoopSolver", "Monitor",
            "start_point", "progress_bar", "REASONS", "UnconvergedGradientWarning",
-           "CollapsedMapWarning"]
+           "CollapsedMapWarning", "BoundaryOverlapWarning"]
 
 
 class UnconvergedGradientWarning(UserWarning):
@@ -42,6 +42,14 @@ class CollapsedMapWarning(UserWarning):
     against it (``"arap"``, ``"conformal"``, ``"angle"``, user energies) can end there; the
     barrier energies (``"symmetric_dirichlet"``, ``"mips"``) cannot.
     """
+
+
+class BoundaryOverlapWarning(UserWarning):
+    """Issued when a free-boundary :func:`jaxparam.minimize` ends with a boundary that
+    crosses itself: every triangle keeps its orientation, but the map folds over itself as
+    a whole (the result's ``boundary_overlaps`` counts the crossing pairs of boundary
+    edges).  The energies keep triangles from flipping, not the boundary from meeting
+    itself (a long, thin or spiral part can swing round onto another)."""
 
 
 #: The ``reason`` strings of :class:`SolveResult`, by the rule that stopped the run.

@@ -19,7 +19,7 @@ from ..host import (face_areas as host_face_areas, face_quantities, map_aspects,
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
-from .base import CollapsedMapWarning, Solver, StopRules
+from .base import BoundaryOverlapWarning, CollapsedMapWarning, Solver, StopRules
 from .conformal import conformal_map, orient_disks
 from .implicit import is_traced, minimize_traced
 from .problem import Problem
@@ -38,7 +38,8 @@ class MinimizeResult:
     ``iterations`` (accepted steps); ``converged``; ``history`` (energy after each
     iteration, the start first); ``seconds`` (wall time, compilation included);
     ``reason`` (why it stopped); ``flips`` (always 0 from an injective start);
-    ``boundary_overlaps`` (free boundary: crossings of the boundary with itself);
+    ``boundary_overlaps`` (free boundary: crossings of the boundary with itself;
+    :func:`minimize` warns :class:`BoundaryOverlapWarning` then);
     ``collapsed`` (faces not flipped but of aspect ``s1 / s2`` above
     :data:`jaxparam.tol.COLLAPSED_ASPECT`: segments in all but name, which an energy without
     a barrier can end with; :func:`minimize` warns :class:`CollapsedMapWarning` then);
@@ -92,6 +93,24 @@ def warn_collapsed(mesh, uv: np.ndarray, energy: str, where: str = "minimize",
             "barrier against a triangle shrinking to a segment. Minimize one that has: "
             "'symmetric_dirichlet' or 'mips'.", CollapsedMapWarning, stacklevel=stacklevel)
     return int(bad.size)
+
+
+def warn_overlaps(mesh, uv: np.ndarray, where: str = "minimize", stacklevel: int = 3) -> int:
+    """The number of pairs of boundary edges of ``uv (n, 2)`` that cross
+    (:func:`jaxparam.metrics.boundary_crossings`), warning :class:`BoundaryOverlapWarning`
+    when there are any."""
+    S, pairs = metrics.boundary_crossings(mesh, uv)
+    if pairs.size:
+        a, b = S[pairs[0, 0]], S[pairs[0, 1]]
+        warnings.warn(
+            f"{where}: the free boundary crosses itself ({pairs.shape[0]} pair"
+            f"{'s' if pairs.shape[0] != 1 else ''} of boundary edges; first: ({int(a[0])}, "
+            f"{int(a[1])}) and ({int(b[0])}, {int(b[1])})): no triangle is flipped, but the map "
+            "folds over itself as a whole, so two parts of the surface share texels. Fix the "
+            "boundary (free_boundary=False; jaxparam flatten without --free-boundary), start "
+            "from another map (init=), or cut the mesh into charts (jp.atlas, which splits a "
+            "chart whose boundary crosses).", BoundaryOverlapWarning, stacklevel=stacklevel)
+    return int(pairs.shape[0])
 
 
 def _collapsed_traced(mesh, uv):
@@ -263,7 +282,7 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
     return MinimizeResult(uv=uv, energy=res.energy, iterations=res.iterations,
                           converged=res.converged, history=res.history, seconds=res.seconds,
                           reason=res.reason, flips=prob.flipped(res.x),
-                          boundary_overlaps=metrics.boundary_overlaps(mesh, uv) if free_boundary else 0,
+                          boundary_overlaps=warn_overlaps(mesh, uv) if free_boundary else 0,
                           collapsed=warn_collapsed(mesh, uv, en.name), solver=solver.name,
                           times=res.times)
 
@@ -305,7 +324,7 @@ def _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, stric
         res = run.result
         uvh = np.array(run.problem.uv(res.x))
         uvh[~mesh.topology.referenced] = np.nan
-        overlaps = metrics.boundary_overlaps(mesh, uvh) if free_boundary else 0
+        overlaps = warn_overlaps(mesh, uvh, stacklevel=4) if free_boundary else 0
         return MinimizeResult(uv=uv, energy=res.energy, iterations=res.iterations,
                               converged=res.converged, history=res.history, seconds=res.seconds,
                               reason=res.reason, flips=run.flips, boundary_overlaps=overlaps,
