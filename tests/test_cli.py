@@ -97,6 +97,25 @@ def test_usage_exit_2(mesh_file):
     assert e.value.code == 2
 
 
+# Found in QA (session 21): these options did nothing without --energy, silently.
+@pytest.mark.parametrize("command", ["flatten", "batch"])
+@pytest.mark.parametrize("extra, named", [
+    (["--free-boundary"], "--free-boundary sets"),
+    (["--max-iters", "5", "--solver", "lbfgs"], "--solver and --max-iters set")])
+def test_minimization_options_without_an_energy_are_refused(mesh_file, tmp_path, capsys,
+                                                             command, extra, named):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / mesh_file.name).write_bytes(mesh_file.read_bytes())
+    src = str(folder / mesh_file.name) if command == "flatten" else str(folder)
+    out = tmp_path / ("o.obj" if command == "flatten" else "out")
+    assert main([command, src, "-o", str(out)] + extra) == 2
+    err = capsys.readouterr().err
+    assert f"jaxparam {command}: error: {named} how an energy is minimized, but no --energy" in err
+    assert "--energy symmetric-dirichlet" in err and not out.exists()
+    assert main([command, src, "-o", str(out), "--energy", "mips"] + extra) == 0
+
+
 def test_console_script_runs(mesh_file, tmp_path):
     r = subprocess.run([sys.executable, "-m", "jaxparam.cli", "info", str(mesh_file)],
                        capture_output=True, text=True, timeout=120)

@@ -29,8 +29,9 @@ from ..options import default_of
 from ..settings import config
 from ..weights import KINDS as WEIGHT_KINDS
 from . import batch, commands
-from .arguments import HelpFormatter, add_flatten_options, add_mirrored, add_named, subparser, version
-from .pipeline import EXIT_INTERRUPTED, failure, flatten_mesh, report_dict, write_json
+from .arguments import (HelpFormatter, add_flatten_options, add_mirrored, add_named,
+                        flatten_option_conflict, subparser, version)
+from .pipeline import EXIT_INTERRUPTED, EXIT_USAGE, failure, flatten_mesh, report_dict, write_json
 
 __all__ = ["main", "build_parser", "flatten_mesh", "report_dict", "write_json"]
 
@@ -181,6 +182,10 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     named = next((a for a in argv if not a.startswith("-")), None)
     args = build_parser(named if named in COMMANDS else None).parse_args(argv)
+    conflict = flatten_option_conflict(args)
+    if conflict:
+        print(f"jaxparam {args.command}: error: {conflict}", file=sys.stderr)
+        return EXIT_USAGE
     if args.quiet:
         config.progress = False
     try:

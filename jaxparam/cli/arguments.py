@@ -16,7 +16,7 @@ from typing import Any, Callable, Iterable
 from .. import boundary as bmap
 from .. import weights as wts
 from ..linear import convex_map
-from ..options import choose, default_of, hyphenated
+from ..options import canonical, choose, default_of, hyphenated
 
 from .pipeline import FLATTEN_OPTIONS, flatten_mesh
 
@@ -177,6 +177,23 @@ def add_flatten_options(p: argparse.ArgumentParser) -> None:
                    help="let the boundary move while minimizing (needs --energy)")
     add_named(p, "--solver", _solver_names, default_of(flatten_mesh, "solver"))
     add_mirrored(p, "--max-iters", flatten_mesh, "max_iters", "iterations at most")
+
+
+def flatten_option_conflict(args: argparse.Namespace) -> str | None:
+    """The message refusing the minimization's options without ``--energy`` (the convex
+    map alone has no iterations, solver or moving boundary, and they would be ignored
+    without a word), or ``None`` when the options agree."""
+    if getattr(args, "energy", "") is not None or not hasattr(args, "free_boundary"):
+        return None
+    given = [name for name, on in (
+        ("--free-boundary", args.free_boundary),
+        ("--solver", canonical(args.solver) != canonical(default_of(flatten_mesh, "solver"))),
+        ("--max-iters", args.max_iters != default_of(flatten_mesh, "max_iters"))) if on]
+    if not given:
+        return None
+    return (f"{' and '.join(given)} set{'s' if len(given) == 1 else ''} how an energy is "
+            "minimized, but no --energy is given: add one (e.g. --energy symmetric-dirichlet), "
+            f"or leave out {' and '.join(given)} for the convex map alone.")
 
 
 def flatten_options(args: argparse.Namespace) -> dict:
