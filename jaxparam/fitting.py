@@ -73,7 +73,12 @@ class Surface:
 
     def sample(self, resolution: int = 64) -> TriMesh:
         """A ``resolution x resolution`` grid over the domain, triangulated, clipped to where
-        the surface is defined; UVs kept in ``.uv``."""
+        the surface is defined; UVs kept in ``.uv``.  Raises :class:`MeshError` unless
+        ``resolution`` is an integer of at least 2."""
+        if not (isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool)
+                and resolution >= 2):
+            raise MeshError(f"fit_surface: the sampling resolution (grid points along each side) "
+                            f"must be an integer >= 2, got {resolution!r}.")
         (u0, u1), (v0, v1) = self.bbox
         u, v = np.meshgrid(np.linspace(u0, u1, resolution), np.linspace(v0, v1, resolution), indexing="ij")
         UV = np.column_stack([u.ravel(), v.ravel()])

@@ -139,7 +139,8 @@ def hierarchy_from_faces(faces: np.ndarray, n_vertices: int) -> Hierarchy:
     if len(levels_faces) == 1:
         raise MeshError("the mesh does not have subdivision connectivity in jaxparam's numbering "
                         "(each face split into four children, new vertices after old ones): make "
-                        "it with jaxparam remesh / jp.remesh.")
+                        "it with jaxparam remesh / jp.remesh at 1 level or more (a remesh of "
+                        "level 0 is its base domain alone, with no detail to compress).")
     levels_faces.reverse()
     H = dyadic_hierarchy(levels_faces[0], int(levels_faces[0].max()) + 1, len(levels_faces) - 1)
     for lv in range(1, len(levels_faces)):

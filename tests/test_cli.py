@@ -403,6 +403,25 @@ def test_fit_names_seamed_uvs_as_such(tmp_path, capsys):
     assert "texture coordinates have seams" in err and "jaxparam flatten" in err
 
 
+# Found in QA (session 21): an atlas saved as .glb (its vertices split at the seams, one UV
+# each) was fitted as one surface across all its charts; --resolution -1 crashed in numpy.
+def test_fit_refuses_split_charts_and_a_bad_resolution(tmp_path, capsys):
+    a, b = jp.shapes.graph_surface(4), jp.shapes.graph_surface(4)
+    V = np.concatenate([np.asarray(a.vertices), np.asarray(b.vertices) + [3.0, 0, 0]])
+    uv = np.concatenate([np.asarray(jp.convex_map(a)) * 0.4, np.asarray(jp.convex_map(b)) * 0.4 + 0.5])
+    p = tmp_path / "charts.ply"
+    jp.save(p, jp.TriMesh(V, np.concatenate([a.faces, b.faces + a.n_vertices])), uv)
+    assert main(["fit", str(p), "-o", str(tmp_path / "s.obj")]) == 3
+    assert "2 connected components (an atlas's charts" in capsys.readouterr().err
+    q = tmp_path / "one.obj"
+    jp.save(q, a, np.asarray(jp.convex_map(a)))
+    for bad in ("-1", "1"):
+        assert main(["fit", str(q), "-o", str(tmp_path / "s.obj"), "--resolution", bad]) == 3
+        assert f"resolution (grid points along each side) must be an integer >= 2, got {bad}" in \
+            capsys.readouterr().err
+    assert not (tmp_path / "s.obj").exists()
+
+
 def test_fit_stays_near_the_mesh_and_warns_where_the_map_squeezes(tmp_path, capsys):
     # Found in QA (session 20): jaxparam fit of a flattened halftunnel wrote a surface 7.6e9
     # across for a mesh 12 across, exit 0.  A disk map of a vase (a tube with a cap) squeezes
@@ -454,3 +473,12 @@ def test_flatten_free_boundary_starts_as_minimize_does(mesh_file, tmp_path):
     uv, rep2 = flatten_mesh(mesh, energy="symmetric-dirichlet", free_boundary=True, say=lambda s: None)
     assert rep2["start"] == "conformal-map"
     np.testing.assert_allclose(uv, np.asarray(res.uv), rtol=0, atol=1e-12)
+
+
+def test_compress_of_a_level_0_remesh_says_to_remesh_deeper(mesh_file, tmp_path, capsys):
+    # Found in QA (session 21): it said "make it with jaxparam remesh", which is how it was made.
+    semi = tmp_path / "lv0.obj"
+    assert main(["-q", "remesh", str(mesh_file), "-o", str(semi), "--levels", "0"]) == 0
+    capsys.readouterr()
+    assert main(["-q", "compress", str(semi), "-o", str(tmp_path / "c.obj")]) == 3
+    assert "at 1 level or more (a remesh of level 0 is its base domain alone" in capsys.readouterr().err

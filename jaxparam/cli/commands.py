@@ -19,7 +19,7 @@ from ..clock import StageClock
 from ..errors import MeshFileError, PointCloudError
 from ..io import load, load_points, save
 from ..mesh import TriMesh
-from ..options import canonical
+from ..options import canonical, default_of
 from .arguments import flatten_options
 from .pipeline import EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
 
@@ -203,10 +203,14 @@ def cmd_meshless(args) -> int:
     if rep["collapsed"]:
         # uniform weights on a small, dense neighbour graph: two points with the same
         # neighbours (up to each other) get one UV (session 20: 24 of 176 small random sets)
+        default_k = default_of(reconstruct_surface, "k")
+        other = ("use --weights shape-preserving (the default) or mean-value, or another --k"
+                 if canonical(args.weights) not in ("shape_preserving", "mean_value")
+                 else "try another --k")
         print(f"jaxparam meshless: warning: {rep['collapsed']} triangles collapsed in the UVs "
               f"(aspect s1/s2 above {tol.COLLAPSED_ASPECT:.0e}: points mapped onto one place or "
-              "one line); use --weights shape-preserving (the default) or mean-value, or a "
-              "smaller --k", file=sys.stderr)
+              f"one line); {other} (this run: {args.k}; the default: {default_k})",
+              file=sys.stderr)
     return finish(args, mesh, uv, report=rep, plot=drawing("plot_uv", mesh, uv),
                   line=f"{args.output}: {P.shape[0]} points, {used} used, {mesh.n_faces} faces, "
                        f"{rec.holes} hole{'s' if rec.holes != 1 else ''}, {rep['flips']} flipped")
@@ -221,6 +225,13 @@ def cmd_fit(args) -> int:
         raise MeshFileError(f"{args.mesh}: the mesh's texture coordinates have seams (several "
                             "UVs at one vertex, as an atlas writes); a surface is fitted over one "
                             "UV per vertex, a disk map: jaxparam flatten MESH -o MESH_WITH_UV.obj")
+    if mesh.uv is not None and mesh.topology.n_components > 1:
+        # an atlas saved as .glb/.ply: its vertices are split at the seams, so each chart is
+        # a component of its own and the UVs look like one map (session 21)
+        raise MeshFileError(f"{args.mesh}: the mesh has {mesh.topology.n_components} connected "
+                            "components (an atlas's charts, split at their seams, look like this); "
+                            "a surface is fitted over one disk map: flatten a single disk mesh "
+                            "(jaxparam flatten MESH -o MESH_WITH_UV.obj) and fit that")
     if mesh.uv is None:
         raise MeshFileError(f"{args.mesh}: the mesh has no per-vertex texture coordinates (vt); "
                             "flatten it first: jaxparam flatten MESH -o MESH_WITH_UV.obj")
