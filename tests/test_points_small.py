@@ -228,3 +228,23 @@ def test_cli_warns_when_uniform_weights_collapse_triangles(tmp_path, capsys):
         err = capsys.readouterr().err
         assert ("triangles collapsed in the UVs" in err) == warned, err
         assert (json.loads(rep.read_text())["collapsed"] > 0) == warned
+        if warned:        # the advice names the other weights and the k of this run
+            assert "use --weights shape-preserving (the default) or mean-value" in err
+            assert "(this run: 4; the default: 10)" in err
+
+
+# Found in QA (session 21): gap=0 returned a quarter of the mesh without a word, bridge_factor=0
+# failed late ("give at least one triangle"), flip_rounds=-1 was taken.
+@pytest.mark.parametrize("option, value, match", [
+    ("gap", 0.0, r"gap .* must lie in \(0, 2 pi\), got 0\.0"),
+    ("gap", 7.0, r"gap .* must lie in \(0, 2 pi\), got 7\.0"),
+    ("bridge_factor", 0.0, r"bridge_factor .* must be a number above 1, got 0\.0"),
+    ("flip_rounds", -1, r"flip_rounds .* must be an integer >= 0, got -1"),
+    ("flip_rounds", 2.5, r"flip_rounds .* must be an integer >= 0, got 2\.5")])
+def test_reconstruction_options_out_of_range_are_refused_before_any_work(option, value, match):
+    P = np.random.default_rng(0).uniform(-1, 1, (60, 3)) * [1, 1, 0.01]
+    with pytest.raises(PointCloudError, match=r"reconstruct_surface: " + match):
+        jp.reconstruct_surface(P, **{option: value})
+    if option == "gap":
+        with pytest.raises(PointCloudError, match=r"meshless_map: " + match):
+            jp.meshless_map(P, gap=value)

@@ -93,6 +93,17 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
     return out + (perm,) if return_order else out
 
 
+def check_gap(where: str, gap) -> None:
+    """Raise :class:`PointCloudError` (naming ``where``) unless the boundary detector's
+    angular ``gap`` (radians) lies in ``(0, 2 pi)``: at 0 every point is a boundary candidate
+    (session 21: a noisy camelhead scan came back with 2,696 faces instead of 9,836), and no
+    gap reaches 2 pi."""
+    if not (isinstance(gap, (int, float, np.integer, np.floating)) and 0.0 < float(gap) < 2.0 * np.pi):
+        raise PointCloudError(f"{where}: gap is the angular gap (radians) that makes a point a "
+                              f"boundary candidate and must lie in (0, 2 pi), got {gap!r}; the "
+                              f"default is {GAP:.4f} (0.7 pi).")
+
+
 def check_map_options(where: str, weights, boundary, spacing) -> tuple[str, str, str]:
     """The canonical ``(weights, boundary, spacing)`` (either spelling accepted), or a
     :class:`PointCloudError` (naming ``where``) unless ``weights`` is one of :data:`WEIGHTS`,
@@ -163,6 +174,7 @@ def meshless_map(points, *, k: int = K, weights: str = "inverse_distance", bound
         uv, bnd = jp.meshless_map(points, k=10, weights="inverse_distance")
     """
     weights, boundary, spacing = check_map_options("meshless_map", weights, boundary, spacing)
+    check_gap("meshless_map", gap)
     sym = symmetric_solve(weights, symmetric, radius)
     if isinstance(points, jax.core.Tracer):
         if graph is None or boundary_indices is None:

@@ -25,8 +25,8 @@ from .graph import (Frames, global_frame, nearest_neighbours, point_graph_in_ord
 from .outliers import drop_points, find_outliers
 from .smoothing import SMOOTHING, smooth_points
 from .squeeze import SQUEEZED_SHARE, SqueezedMapWarning, squeeze_message, squeezed_share
-from .meshless import (check_boundary_indices, check_map_options, check_points, map_points,
-                       symmetric_solve)
+from .meshless import (check_boundary_indices, check_gap, check_map_options, check_points,
+                       map_points, symmetric_solve)
 from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
                             interior_holes, lone_points, long_faces, longest_edges, onto_chords,
                             outside_bridges,
@@ -126,8 +126,9 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     shows for runs longer than a second).
 
     **Returns:** a :class:`Reconstruction` (``rec.mesh``, ``rec.uv``, ``rec.boundary``,
-    ``rec.points_used``, ``rec.seconds``).  Raises :class:`PointCloudError` for an option
-    it does not know.
+    ``rec.points_used``, ``rec.seconds``).  Raises :class:`PointCloudError`, before any work,
+    for an option it does not know or a value out of its range (``gap`` in ``(0, 2 pi)``,
+    ``bridge_factor > 1``, ``flip_rounds >= 0``).
 
     Example::
 
@@ -143,6 +144,17 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
             "jp.meshless_map(points, graph=..., boundary_indices=...) or the reconstructed mesh's "
             "own maps (e.g. jp.convex_map(jp.TriMesh(P, rec.mesh.faces))) instead.")
     weights, boundary, spacing = check_map_options("reconstruct_surface", weights, boundary, spacing)
+    check_gap("reconstruct_surface", gap)
+    if not (isinstance(bridge_factor, (int, float, np.integer, np.floating)) and bridge_factor > 1.0):
+        raise PointCloudError("reconstruct_surface: bridge_factor (how many local spacings a "
+                              "face's longest edge may span before it counts as a bridge) must be "
+                              f"a number above 1, got {bridge_factor!r}; the default is "
+                              f"{BRIDGE_FACTOR}.")
+    if not (isinstance(flip_rounds, (int, np.integer)) and not isinstance(flip_rounds, bool)
+            and flip_rounds >= 0):
+        raise PointCloudError("reconstruct_surface: flip_rounds (rounds of 3D Delaunay edge "
+                              f"flips; 0 turns them off) must be an integer >= 0, got "
+                              f"{flip_rounds!r}.")
     if smooth not in SMOOTHING:
         raise PointCloudError(f"reconstruct_surface: smooth must be one of {SMOOTHING}, got {smooth!r}.")
     with reuse_freed_memory(np.shape(points)[0] if np.ndim(points) == 2 else 0):
