@@ -9,7 +9,7 @@ import pytest
 import jaxparam as jp
 from jaxparam.cli import main
 from jaxparam.errors import MeshError, TopologyError
-from jaxparam.remesh import Remesh, base_domain, refine_domain
+from jaxparam.remesh import Remesh, area_aware_map, base_domain, refine_domain
 from jaxparam.subdivision import (CHILDREN, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces,
                                   midpoint_refine, split_corner_values)
 from jaxparam.triangles import locate
@@ -280,3 +280,19 @@ def test_a_mesh_with_no_interior_vertex_is_remeshed_from_its_boundary_map():
         semi = jp.remesh(mesh, levels=2)
         assert np.all(np.isfinite(np.asarray(semi.mesh.vertices)))
         assert (area2(np.asarray(semi.mesh.uv), semi.mesh.faces) > 0).all()
+
+
+# Found in QA (session 21): jaxparam remesh --weights harmonic on a noisy disk said only "the
+# start has infinite energy (stretch); a degenerate or inverted triangle?".
+def test_area_aware_map_names_a_folding_start_and_the_weights_to_use():
+    m = jp.shapes.graph_surface(10)
+    V = np.asarray(m.vertices).copy()
+    inner = m.topology.interior
+    V[inner, :2] += np.random.default_rng(1).normal(0, 0.03, (inner.size, 2))
+    noisy = jp.TriMesh(V, m.faces)
+    assert jp.metrics.flips(noisy, jp.convex_map(noisy, weights="harmonic")) > 0
+    with pytest.raises(MeshError, match=r"area_aware_map: the convex map with 'harmonic' weights "
+                       r"folds: faces \d+ \(1 in all\).*negative where angles are obtuse.*"
+                       r"'shape_preserving' \(the default\) or 'mean_value'"):
+        area_aware_map(noisy, weights="harmonic")
+    assert jp.metrics.flips(noisy, area_aware_map(noisy)) == 0
