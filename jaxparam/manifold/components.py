@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import MeshError
+from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
 from .parameterization import ManifoldParameterization, fewest_faces, manifold_map
@@ -110,7 +110,17 @@ def manifold_map_each(mesh: TriMesh, base_faces=100, *, method: str = "maps",
                             f"[{least}, {sub.n_faces}), got {nb!r}; give more faces to it (one count per "
                             "component) or leave it out of the mesh.")
     result = []
-    for (verts, faces, sub), nb in zip(parts, counts):
-        base, param = manifold_map(sub, int(nb), method=method, verbose=verbose)
+    for k, ((verts, faces, sub), nb) in enumerate(zip(parts, counts)):
+        try:
+            base, param = manifold_map(sub, int(nb), method=method, verbose=verbose)
+        except SolverError as exc:
+            # The advice of one component's failure ("ask for more than N base faces") is
+            # about its own share, which the caller does not give when base_faces is a total.
+            raise SolverError(
+                f"manifold_map_each: component {k} (vertices from {int(verts[0])}, genus "
+                f"{sub.topology.genus}, {sub.n_faces} faces), given {int(nb)} of the base faces "
+                f"{list(map(int, counts))} (largest component first): {exc} Pass one count per "
+                "component (base_faces=[...]; on the command line, a larger total).",
+                stage=exc.stage) from None
         result.append(ComponentMap(verts, faces, base, param))
     return tuple(result)

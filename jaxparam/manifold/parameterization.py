@@ -491,6 +491,14 @@ METHODS = ("maps", "paths")
 SELECT_MAX_FACES = 30_000
 SELECT_LEVEL = 4
 
+#: The choice among base domains runs only while the level :data:`SELECT_LEVEL` remesh it
+#: compares has at most this many faces (``base_faces * 4 ** SELECT_LEVEL``: up to 468 base
+#: faces); with more base faces the first cap's domain is kept, as above
+#: :data:`SELECT_MAX_FACES`.  Each candidate's relaxed level-4 remesh took most of the time:
+#: cow at 2,000 base faces 88 s (64 s of it relaxing three 512k-face remeshes), at 5,518 of
+#: its 5,520 faces 255 s, even for a level-2 remesh (session-21 option sweep).
+SELECT_MAX_REMESH_FACES = 120_000
+
 
 
 
@@ -513,8 +521,9 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
     base domain ``T^0`` (even; at least :func:`fewest_faces`: ``4`` for genus 0 and
     ``14 g + 10`` for genus ``g >= 1``; fewer than the mesh's faces); ``method`` the
     route: ``"maps"`` (default: the map is built during the decimation, MAPS, Lee et al.
-    1998, so it never gets blocked; on inputs of at most :data:`SELECT_MAX_FACES` faces it
-    decimates once per area cap of :data:`~jaxparam.manifold.maps.AREA_CAPS` and keeps the
+    1998, so it never gets blocked; on inputs of at most :data:`SELECT_MAX_FACES` faces, and
+    for at most :data:`SELECT_MAX_REMESH_FACES` ``/ 256`` base faces, it decimates once per
+    area cap of :data:`~jaxparam.manifold.maps.AREA_CAPS` and keeps the
     base domain whose remesh is estimated closest to the input) or ``"paths"`` (surface
     edges traced along the mesh's
     edges, Floater, Hormann and Reimers, with refinement when blocked; can fail with a
@@ -598,11 +607,14 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
 
 def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     """:func:`manifold_map` with ``method="maps"``: one base domain per area cap (the first
-    only above :data:`SELECT_MAX_FACES` faces), the one whose default level
-    :data:`SELECT_LEVEL` remesh is estimated closest to the input kept."""
+    only above :data:`SELECT_MAX_FACES` faces or :data:`SELECT_MAX_REMESH_FACES` remesh
+    faces), the one whose default level :data:`SELECT_LEVEL` remesh is estimated closest to
+    the input kept."""
     V = np.asarray(mesh.vertices, np.float64)
     Fm = np.asarray(mesh.faces, np.int64)
-    caps = AREA_CAPS if mesh.n_faces <= SELECT_MAX_FACES else AREA_CAPS[:1]
+    choose = (mesh.n_faces <= SELECT_MAX_FACES
+              and base_faces * 4 ** SELECT_LEVEL <= SELECT_MAX_REMESH_FACES)
+    caps = AREA_CAPS if choose else AREA_CAPS[:1]
     best, sharp = None, None
     # The decimations run together while they make the same collapses (issue 13); each
     # result is the one decimating with its cap alone gives, or the error it raises.
