@@ -20,12 +20,12 @@ from . import sparse
 from . import weights as wts
 from .disk import disk_check, fill_holes
 from .errors import MeshError, SolverError, first_few
-from .mesh import TriMesh
+from .mesh import TriMesh, concrete_values
 from .io import as_mesh
 from .options import choose
-from .triangles import face_angles
+from .triangles import face_angles, signed_area2
 
-__all__ = ["InteriorSystem", "interior_system", "solve_interior", "convex_map",
+__all__ = ["InteriorSystem", "interior_system", "solve_interior", "convex_map", "check_unfolded",
            "least_squares_map", "fill_holes", "disk_check"]
 
 
@@ -245,3 +245,23 @@ def _extend_edge_values(vals, old_topo, new_topo):
     pos = np.searchsorted(keys_old, keys_new)
     found = (pos < keys_old.size) & (keys_old[np.minimum(pos, keys_old.size - 1)] == keys_new)
     return jnp.where(jnp.asarray(found), vals[np.minimum(pos, keys_old.size - 1)], jnp.mean(vals))
+
+
+def check_unfolded(mesh, uv, weights: str, where: str) -> None:
+    """Raise :class:`MeshError` when the convex map ``uv (n, 2)`` (of ``weights``) flips or
+    collapses a face, for a caller that minimizes from it (a minimization keeps its start's
+    triangles unflipped, so it needs one with none).  Harmonic weights are negative where
+    angles are obtuse and their map can fold on a noisy mesh (session 21: "the start has
+    infinite energy" was all ``jaxparam remesh --weights harmonic`` said).  Under a JAX
+    transformation (no concrete values) it checks nothing."""
+    known = concrete_values(uv)
+    if known is None:
+        return
+    S = signed_area2(np.nan_to_num(np.asarray(known, np.float64)), np.asarray(mesh.faces))
+    bad = np.flatnonzero(~(S > 0))
+    if bad.size:
+        why = " (harmonic weights are negative where angles are obtuse)" if weights == "harmonic" else ""
+        raise MeshError(f"{where}: the convex map with {weights!r} weights folds: faces "
+                        f"{first_few(bad)} are flipped or degenerate in it, and the minimization "
+                        f"starts from it{why}; use weights 'shape_preserving' (the default) or "
+                        "'mean_value', which never fold (jaxparam remesh --weights).")

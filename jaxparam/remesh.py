@@ -48,7 +48,7 @@ from .disk import disk_check
 from . import geometry
 from .distance import point_triangle_distance, surface_distance
 from .energies import ENERGIES, density_stretch
-from .linear import convex_map
+from .linear import check_unfolded, convex_map
 from .mesh import TriMesh, concrete_values
 from .io import as_mesh
 from .optimize import Newton, Problem, StopRules, minimize
@@ -511,22 +511,7 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     start = convex_map(mesh, weights=weights, boundary="circle")
     if mesh.topology.interior.size == 0:    # every vertex on the circle: nothing to minimize
         return start
-    known = concrete_values(start)
-    if known is not None:
-        # Harmonic weights are negative at obtuse angles, and their map can fold (a noisy
-        # mesh); the minimization keeps a start's triangles unflipped, so it needs one that
-        # has none (session 21: "the start has infinite energy" was all the user read).
-        S = signed_area2(np.nan_to_num(np.asarray(known, np.float64)), np.asarray(mesh.faces))
-        bad = np.flatnonzero(~(S > 0))
-        if bad.size:
-            raise MeshError(
-                f"area_aware_map: the convex map with {weights!r} weights folds: faces "
-                f"{first_few(bad)} are flipped or degenerate in it, and the area-aware map "
-                "starts from it"
-                + (" (harmonic weights are negative where angles are obtuse)" if weights ==
-                   "harmonic" else "")
-                + "; use weights 'shape_preserving' (the default) or 'mean_value', which "
-                "never fold (jaxparam remesh --weights).")
+    check_unfolded(mesh, start, weights, "area_aware_map")
     if default and not isinstance(mesh.vertices, jax.core.Tracer):
         V = np.asarray(mesh.vertices, np.float64)
         area = np.asarray(geometry.face_areas(V, mesh.faces))
