@@ -624,6 +624,11 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
         w = jp.energy(lambda s1, s2, a: s1 ** 2 + s2 ** 2 + a * (s1 ** -2 + s2 ** -2), 2.0)
         jax.grad(lambda a: jnp.sum(jp.minimize(mesh, jp.energy(f, a)).uv ** 2))(2.0)
     """
+    if not callable(fn):
+        hint = (f"; for the named energy pass {fn!r} itself (jp.minimize(mesh, {fn!r})) or use "
+                f"jp.ENERGIES[{fn!r}]" if isinstance(fn, str) else "")
+        raise MeshError(f"energy: fn must be a function of the singular values (s1, s2) or of "
+                        f"the Jacobian (J), got {fn!r}{hint}.")
     parametric = params is not _NO_PARAMS
     try:
         args = [p for p in inspect.signature(fn).parameters.values()

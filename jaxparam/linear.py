@@ -93,6 +93,8 @@ def _boundary_only(V, loop, user_uv, shape, spacing, corners):
 
 def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, spacing, corners,
               backend, where, host: bool = False):
+    if not isinstance(host, (bool, np.bool_)):
+        raise MeshError(f"{where}: host must be True or False, got {host!r}.")
     disk_check(mesh, where)
     spacing = choose(spacing, bmap.SPACINGS, what="spacing", where=where)
     work, added = fill_holes(mesh)
@@ -220,6 +222,10 @@ def least_squares_map(mesh: TriMesh, *, mu=None, boundary="circle", spacing: str
         elif callable(mu):
             vals = mu(jnp.asarray(work.vertices), E)
         else:
+            if isinstance(mu, str) or np.asarray(mu).dtype.kind not in "biuf":
+                raise MeshError(f"least_squares_map: mu must be None (inverse edge lengths), an "
+                                f"({E.shape[0]},) array of positive edge weights or a function "
+                                f"(V, E) -> weights, got {mu!r}.")
             vals = jnp.asarray(mu, dtype=jnp.float64)
             if work.topology is not mesh.topology:
                 vals = _extend_edge_values(vals, mesh.topology, work.topology)

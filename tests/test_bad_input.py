@@ -376,3 +376,35 @@ def test_csv_points_are_still_read(tmp_path):
     p = tmp_path / "p.csv"
     np.savetxt(p, np.arange(12.0).reshape(4, 3), delimiter=",")
     np.testing.assert_array_equal(jp.load_points(p), np.arange(12.0).reshape(4, 3))
+
+
+# Found in QA (session 21, the Python API): these reached TypeErrors deep in the driver or
+# numpy, or were taken silently ("no" as a free boundary ran a free-boundary minimization).
+@pytest.mark.parametrize("call, match", [
+    (lambda m: jp.minimize(m, max_iters="5"), r"minimize: max_iters must be an integer >= 0, got '5'"),
+    (lambda m: jp.minimize(m, max_iters=2.5), r"max_iters must be an integer >= 0, got 2\.5"),
+    (lambda m: jp.minimize(m, max_iters=True), r"max_iters must be an integer >= 0, got True"),
+    (lambda m: jp.minimize(m, energy_rtol="1e-3"), r"energy_rtol must be a number >= 0, got '1e-3'"),
+    (lambda m: jp.minimize(m, free_boundary="no"), r"free_boundary must be True or False, got 'no'"),
+    (lambda m: jp.least_squares_map(m, mu="uniform"), r"least_squares_map: mu must be None .*got 'uniform'"),
+    (lambda m: jp.convex_map(m, host="no"), r"convex_map: host must be True or False, got 'no'"),
+    (lambda m: jp.energy("mips"), r"energy: fn must be a function .*jp\.ENERGIES\['mips'\]"),
+    (lambda m: jp.plot.plot_uv(m, np.zeros((5, 2))), r"plot_uv: uv must have shape \(\d+, 2\)"),
+    (lambda m: jp.plot.plot_checkerboard(m, jp.convex_map(m), squares="8"),
+     r"plot_checkerboard: squares must be an integer >= 1, got '8'"),
+])
+def test_api_options_of_the_wrong_type_are_named(grid_mesh, call, match):
+    with pytest.raises(MeshError, match=match):
+        call(grid_mesh)
+
+
+def test_plots_take_a_vertices_faces_pair_and_a_manifold_map_prints_one_line(tmp_path):
+    m = jp.shapes.graph_surface(6)
+    pair = (np.asarray(m.vertices), np.asarray(m.faces))
+    uv = np.asarray(jp.convex_map(m))
+    jp.plot.plot_uv(pair, uv, tmp_path / "uv.png")
+    jp.plot.plot_checkerboard(pair, uv, tmp_path / "c.png")
+    assert (tmp_path / "uv.png").stat().st_size > 0 and (tmp_path / "c.png").stat().st_size > 0
+    _, param = jp.manifold_map(jp.shapes.sphere(1), 8, verbose=False)
+    assert repr(param) == ("ManifoldParameterization(mesh=" + repr(param.mesh) + ", 8 base faces "
+                           f"over {len(param.base_vertices)} base vertices, method='maps')")

@@ -328,6 +328,14 @@ class ManifoldParameterization:
     vertex_bary: np.ndarray
     structure: ManifoldStructure | None = None
 
+    def __repr__(self) -> str:
+        # one line, as TriMesh's: the arrays' values flooded a notebook cell (86 kB for a
+        # 320-face sphere, session 21)
+        method = getattr(self.structure, "method", None)
+        return (f"ManifoldParameterization(mesh={self.mesh!r}, {self.base_faces.shape[0]} base "
+                f"faces over {len(self.base_vertices)} base vertices"
+                + (f", method={method!r}" if method else "") + ")")
+
     def tree_flatten(self):
         return (self.mesh, self.face_uv, self.vertex_bary), _Static(getattr(self, f) for f in _STATIC_FIELDS)
 

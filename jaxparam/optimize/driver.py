@@ -253,17 +253,17 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
             "parameter under jax.grad captured by a lambda), which its compiled kernels cannot "
             "take; pass it as a parameter instead: jp.energy(lambda s1, s2, p: ..., params=p), "
             "and jax.grad reaches it through the implicit gradient.")
+    if not isinstance(free_boundary, (bool, np.bool_)):
+        raise MeshError(f"minimize: free_boundary must be True or False, got {free_boundary!r}.")
     if free_boundary and en_mod.ENERGIES.get(en.name) is en and en.name in en_mod.NO_FREE_MINIMUM:
         raise MeshError(
             f"minimize: {en.name!r} with a free boundary {en_mod.NO_FREE_MINIMUM[en.name]}; keep "
             "the boundary fixed (free_boundary=False), or minimize an energy with a free "
             "minimum: 'symmetric_dirichlet', 'arap', 'conformal' or 'mips'.")
     solver = solver_from(solver)
-    if max_iters < 0:
-        raise MeshError(f"minimize: max_iters must be >= 0, got {max_iters}.")
-    disk_check(mesh, "minimize")
     stop = StopRules(max_iters=max_iters, energy_rtol=energy_rtol, grad_rtol=grad_rtol,
-                     max_seconds=max_seconds)
+                     max_seconds=max_seconds)      # checks them, before any work
+    disk_check(mesh, "minimize")
     if is_traced((mesh.vertices, init, en.params)):
         return _minimize_traced(mesh, en, init, free_boundary, solver, stop, verbose, strict)
     default = init is None

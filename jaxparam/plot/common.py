@@ -8,13 +8,26 @@ from pathlib import Path
 import numpy as np
 
 from .. import metrics, tol
-from ..io import atomic_write
+from ..errors import MeshError
+from ..io import as_mesh, atomic_write
 
 __all__ = ["DPI", "new_figure", "finish", "RobustLimits", "robust_limits", "FaceStates",
            "face_states"]
 
 #: Default resolution of every picture, in dots per inch.
 DPI = 150
+
+
+def mesh_and_uv(mesh, uv, where: str):
+    """``(TriMesh, uv (n, 2) float64)`` of a plotting function's arguments: ``mesh`` anything
+    :func:`~jaxparam.io.as_mesh` takes (a ``(V, F)`` pair too); raises :class:`MeshError`
+    naming ``where`` when ``uv`` is not one row per vertex (session 21: an ``IndexError``)."""
+    mesh = as_mesh(mesh, where)
+    U = np.asarray(uv, np.float64)
+    if U.shape != (mesh.n_vertices, 2):
+        raise MeshError(f"{where}: uv must have shape ({mesh.n_vertices}, 2), one row per vertex, "
+                        f"got {U.shape}.")
+    return mesh, U
 
 
 def new_figure(size: tuple[float, float], dpi: int = DPI):

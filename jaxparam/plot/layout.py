@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import metrics
-from .common import DPI, face_states, finish, new_figure, robust_limits
+from .common import DPI, face_states, finish, mesh_and_uv, new_figure, robust_limits
 
 __all__ = ["QUANTITIES", "plot_uv"]
 
@@ -17,9 +17,9 @@ def plot_uv(mesh, uv, path=None, *, title: str | None = None, quantity: str = "a
             percentile: float = 98.0, dpi: int = DPI, size: float = 6.0):
     """Draw the UV triangulation coloured per face, with its boundary loops in black.
 
-    **Arguments:** ``mesh`` a :class:`~jaxparam.TriMesh`; ``uv: (n, 2)``; ``path`` save
-    here when given; ``quantity`` ``"aspect"`` (``log2(σ1/σ2)``, 0 for a conformal face)
-    or ``"area"`` (``log2`` of the UV/3D area ratio, rescaled to equal totals);
+    **Arguments:** ``mesh`` a :class:`~jaxparam.TriMesh` (or a ``(V, F)`` pair); ``uv:
+    (n, 2)``; ``path`` save here when given; ``quantity`` ``"aspect"`` (``log2(σ1/σ2)``, 0
+    for a conformal face) or ``"area"`` (``log2`` of the UV/3D area ratio, rescaled to equal totals);
     ``percentile`` sets the colour limits (``[0, p98]`` for the aspect, ``±p98`` of
     ``|log2|`` for the area, or Tukey's far fence when lower: :func:`.robust_limits`), so a
     few outliers cannot wash the picture out; the colorbar says which share of the faces
@@ -40,7 +40,7 @@ def plot_uv(mesh, uv, path=None, *, title: str | None = None, quantity: str = "a
     from ..options import choose
 
     quantity = choose(quantity, QUANTITIES, what="quantity", where="plot_uv")
-    U = np.asarray(uv, np.float64)
+    mesh, U = mesh_and_uv(mesh, uv, "plot_uv")
     F = np.asarray(mesh.faces)
     fd = metrics.face_distortion(mesh, U)
     s1, s2 = np.asarray(fd["s1"]), np.asarray(fd["s2"])

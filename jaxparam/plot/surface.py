@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import DPI, finish, new_figure
+from ..errors import MeshError
+from .common import DPI, finish, mesh_and_uv, new_figure
 from .raster import downsample, rasterize, shading, vertex_normals, wire
 
 __all__ = ["CHECKER_COLORS", "checker_image", "plot_checkerboard", "plot_remesh",
@@ -71,8 +72,8 @@ def plot_checkerboard(mesh, uv, path=None, *, squares: int = 8, title: str | Non
     of every pixel is interpolated in its face and coloured by its checker square, so the
     squares are straight wherever the map is linear.
 
-    **Arguments:** ``mesh`` a :class:`~jaxparam.TriMesh`; ``path`` save the picture here
-    (PNG, or the extension's format) when given; ``squares`` along the longer side of the
+    **Arguments:** ``mesh`` a :class:`~jaxparam.TriMesh` (or a ``(V, F)`` pair); ``path``
+    save the picture here (PNG, or the extension's format) when given; ``squares`` along the longer side of the
     UV box; ``elev``, ``azim`` the view in degrees (orthographic); ``dpi``; ``size`` the
     longer side in inches.
 
@@ -82,7 +83,9 @@ def plot_checkerboard(mesh, uv, path=None, *, squares: int = 8, title: str | Non
 
         fig = jp.plot.plot_checkerboard(mesh, uv, "checker.png")
     """
-    U = np.asarray(uv, np.float64)
+    mesh, U = mesh_and_uv(mesh, uv, "plot_checkerboard")
+    if isinstance(squares, bool) or not isinstance(squares, (int, np.integer)) or squares < 1:
+        raise MeshError(f"plot_checkerboard: squares must be an integer >= 1, got {squares!r}.")
     F = mesh.faces
     fin = np.all(np.isfinite(U), 1)
     lo = U[fin].min(0) if fin.any() else np.zeros(2)
