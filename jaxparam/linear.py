@@ -222,7 +222,9 @@ def least_squares_map(mesh: TriMesh, *, mu=None, boundary="circle", spacing: str
         elif callable(mu):
             vals = mu(jnp.asarray(work.vertices), E)
         else:
-            if isinstance(mu, str) or np.asarray(mu).dtype.kind not in "biuf":
+            dt = getattr(mu, "dtype", None)      # a tracer's too (gradients in mu)
+            dt = np.dtype(dt if dt is not None else np.asarray(mu).dtype)
+            if isinstance(mu, str) or dt.kind not in "biuf":
                 raise MeshError(f"least_squares_map: mu must be None (inverse edge lengths), an "
                                 f"({E.shape[0]},) array of positive edge weights or a function "
                                 f"(V, E) -> weights, got {mu!r}.")
