@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 __all__ = ["K", "K_DETECT", "K_FRAME", "GAP", "MAX_SLOPE", "MIN_NORMAL_DOT", "BRIDGE_FACTOR",
-           "HOLE_SHARE", "HOLE_INRADIUS", "HOLE_FACES", "FLIP_ROUNDS",
+           "HOLE_SHARE", "HOLE_INRADIUS", "HOLE_FACES", "HOLE_REFERENCE_POINTS", "FLIP_ROUNDS",
            "OUTLIER_SCALE", "OUTLIER_HEIGHT", "OUTLIER_ISOLATION",
            "OUTLIER_ROUNDS", "OUTLIER_MIN_NEIGHBOURS", "EAR_MAX_BASE",
            "CHORD_TOL", "CHORD_ROUNDS"]
@@ -42,15 +42,20 @@ BRIDGE_FACTOR = 3.0
 
 #: A group of too-long faces inside the reconstruction opens a hole when it has at least
 #: ``HOLE_FACES`` faces, at least ``HOLE_SHARE`` of its vertices see an angular gap (the edge
-#: of a hole in the scan), and its fattest face's inradius is at least ``HOLE_INRADIUS`` local
-#: spacings (an empty disk, not a sliver).  Measured at 8k points (session 21, ``benchmarks/
+#: of a hole in the scan), and its fattest face's inradius is at least ``HOLE_INRADIUS``
+#: local spacings (an empty disk, not a sliver) times ``sqrt(ln N / ln HOLE_REFERENCE_POINTS)``
+#: for ``N`` points above ``HOLE_REFERENCE_POINTS`` (the largest empty disk of a random sample
+#: grows so, in spacings).  Measured at 8k and 20k points (session 21, ``benchmarks/
 #: points.py --holes`` sets): the sampled holes' groups have 4-20 faces, shares 0.6-1.0 and
-#: inradii 0.81-1.96; the groups of sets without holes, shares above 0.5 only with inradii of
-#: 0.06-0.65 (slivers by outliers and sparse patches), or 2 faces (0.75, 0.83: a gap in a
-#: clean sample).
-HOLE_SHARE = 0.5
+#: inradii 0.81-2.5; the groups of sets without holes, shares of 0.5 or more only with inradii
+#: of 0.06-0.65 (slivers by outliers and sparse patches), or 2 faces (0.75, 0.83: a gap in a
+#: clean sample).  At 1M uniform random points two gaps passed 3 faces, share 0.5 and 0.75
+#: spacings ((4 faces, 0.5, 0.90), (3, 0.6, 0.76)): hence 4 faces, 0.55 and the scaling (0.93
+#: at 1M).
+HOLE_SHARE = 0.55
 HOLE_INRADIUS = 0.75
-HOLE_FACES = 3
+HOLE_FACES = 4
+HOLE_REFERENCE_POINTS = 8000
 
 #: Most rounds of independent 3D Delaunay edge flips in the reconstruction.
 FLIP_ROUNDS = 100

@@ -18,7 +18,7 @@ from ..mesh import TriMesh
 from ..topology import half_edge_twins
 from .boundary import detect_boundary
 from .defaults import (BRIDGE_FACTOR, CHORD_ROUNDS, FLIP_ROUNDS, GAP, HOLE_FACES, HOLE_INRADIUS,
-                       HOLE_SHARE, K, K_DETECT,
+                       HOLE_REFERENCE_POINTS, HOLE_SHARE, K, K_DETECT,
                        K_FRAME, MAX_SLOPE, OUTLIER_ROUNDS)
 from .graph import (Frames, global_frame, nearest_neighbours, point_graph_in_order, refresh_frames,
                     robust_frames, unreachable)
@@ -105,7 +105,7 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     is kept.  ``holes``: such long faces inside the surface open a hole where they span an
     empty disk whose edge points see an angular gap larger than ``gap`` (a hole in the scan:
     :func:`~jaxparam.points.triangulation.interior_holes` with ``HOLE_SHARE``,
-    ``HOLE_INRADIUS`` and ``HOLE_FACES``); the mesh is then a disk with holes, its UVs still
+    ``HOLE_INRADIUS`` (widened for large sets) and ``HOLE_FACES``); the mesh is then a disk with holes, its UVs still
     one-to-one (``holes=False`` bridges them, as a disk).
 
     An interior point that the map puts on a chord of the boundary polygon (a boundary point
@@ -292,9 +292,10 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     twin = half_edge_twins(F, len(P)) if twin is None else twin
     keep = ~outside_bridges(F, too_long, len(P), twin=twin)
     if holes and graph.detect_gap is not None:
+        widen = np.sqrt(max(np.log(len(P)) / np.log(HOLE_REFERENCE_POINTS), 1.0))
         keep &= ~interior_holes(F, P, too_long & keep, graph.detect_gap > gap, graph.spacing,
-                                share=HOLE_SHARE, inradius=HOLE_INRADIUS, faces=HOLE_FACES,
-                                twin=twin)
+                                share=HOLE_SHARE, inradius=HOLE_INRADIUS * widen,
+                                faces=HOLE_FACES, twin=twin)
     keep = peel_ears(F, P, graph, twin=twin, alive=keep, return_mask=True)
     name = kept[order]                                   # working index -> input index
     dropped = np.flatnonzero(where < 0)                  # outliers, as rows of P0 (not mapped)
