@@ -80,3 +80,24 @@ def test_cli_reports_holes_and_can_bridge_them(tmp_path):
     assert json.loads(rep.read_text())["holes"] == 1
     assert main(["-q", "meshless", str(p), "-o", str(out), "--report", str(rep), "--no-holes"]) == 0
     assert json.loads(rep.read_text())["holes"] == 0
+
+
+def test_the_empty_disk_a_hole_needs_widens_with_the_points(monkeypatch):
+    # A random sample's largest gap grows with sqrt(ln N) spacings: at 1M points two gaps of a
+    # uniform sample opened as holes with the 8k threshold (session 21).
+    import jaxparam.points.reconstruct as R
+    seen = []
+    real = R.interior_holes
+    monkeypatch.setattr(R, "interior_holes", lambda *a, **k: seen.append(k) or real(*a, **k))
+    jp.reconstruct_surface(holed_sheet(3000, 1), verbose=False)
+    jp.reconstruct_surface(holed_sheet(20000, 1), verbose=False)
+    assert seen[0]["inradius"] == pytest.approx(0.75)
+    # (the points the outlier test keeps, about 20,000)
+    assert seen[1]["inradius"] == pytest.approx(0.75 * np.sqrt(np.log(20000) / np.log(8000)), rel=1e-4)
+    assert seen[1]["faces"] == 4 and seen[1]["share"] == 0.55
+
+
+@pytest.mark.slow          # 6 s
+def test_a_large_random_sample_without_holes_stays_a_disk():
+    rec = jp.reconstruct_surface(holed_sheet(200_000, 0, seed=3), verbose=False)
+    assert rec.holes == 0 and len(rec.mesh.topology.boundary_loops) == 1
