@@ -31,7 +31,7 @@ from . import sparse
 from .errors import MeshError
 from .mesh import TriMesh, concrete_values, grid_faces
 from .io import as_mesh
-from .options import choose
+from .options import choose, is_integer, is_number
 from .triangles import barycentric
 
 __all__ = ["Surface", "fit_surface", "KINDS", "SMOOTHING"]
@@ -75,8 +75,7 @@ class Surface:
         """A ``resolution x resolution`` grid over the domain, triangulated, clipped to where
         the surface is defined; UVs kept in ``.uv``.  Raises :class:`MeshError` unless
         ``resolution`` is an integer of at least 2."""
-        if not (isinstance(resolution, (int, np.integer)) and not isinstance(resolution, bool)
-                and resolution >= 2):
+        if not (is_integer(resolution) and resolution >= 2):
             raise MeshError(f"fit_surface: the sampling resolution (grid points along each side) "
                             f"must be an integer >= 2, got {resolution!r}.")
         (u0, u1), (v0, v1) = self.bbox
@@ -167,8 +166,7 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     if not hasattr(mesh_or_points, "shape"):
         mesh_or_points = as_mesh(mesh_or_points, "fit_surface")
     kind = choose(kind, KINDS, what="kind", where="fit_surface")
-    if not (isinstance(smoothing, (int, float, np.integer, np.floating)) and not isinstance(smoothing, bool)
-            and np.isfinite(smoothing) and smoothing >= 0):
+    if not (is_number(smoothing) and np.isfinite(smoothing) and smoothing >= 0):
         raise MeshError(f"fit_surface: smoothing must be a number >= 0 (0: plain least squares), "
                         f"got {smoothing!r}.")
     if hasattr(uv, "uv_faces") and hasattr(uv, "chart"):

@@ -22,7 +22,7 @@ from .disk import disk_check, fill_holes
 from .errors import MeshError, SolverError, first_few
 from .mesh import TriMesh, concrete_values
 from .io import as_mesh
-from .options import choose
+from .options import choose, is_flag
 from .triangles import face_angles, signed_area2
 
 __all__ = ["InteriorSystem", "interior_system", "solve_interior", "convex_map", "check_unfolded",
@@ -93,7 +93,7 @@ def _boundary_only(V, loop, user_uv, shape, spacing, corners):
 
 def _map_with(mesh: TriMesh, w_of, symmetric: bool, normalize: bool, boundary, spacing, corners,
               backend, where, host: bool = False):
-    if not isinstance(host, (bool, np.bool_)):
+    if not is_flag(host):
         raise MeshError(f"{where}: host must be True or False, got {host!r}.")
     disk_check(mesh, where)
     spacing = choose(spacing, bmap.SPACINGS, what="spacing", where=where)

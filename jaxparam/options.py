@@ -16,9 +16,11 @@ from __future__ import annotations
 import inspect
 from typing import Any, Callable, Iterable
 
+import numpy as np
+
 from .errors import MeshError
 
-__all__ = ["canonical", "hyphenated", "choose", "default_of"]
+__all__ = ["canonical", "hyphenated", "choose", "default_of", "is_integer", "is_number", "is_flag"]
 
 _NONE = object()
 
@@ -75,3 +77,19 @@ def default_of(func: Callable, name: str, fallback: Any = _NONE) -> Any:
         return fallback
     raise TypeError(f"default_of: {getattr(func, '__qualname__', func)} has no parameter "
                     f"{name!r} with a default.")
+
+
+def is_integer(x) -> bool:
+    """Whether ``x`` is an integer option value (Python or NumPy; ``True`` is not one)."""
+    return isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+
+
+def is_number(x) -> bool:
+    """Whether ``x`` is a real number option value (int or float, Python or NumPy; not a
+    bool, a string or an array)."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def is_flag(x) -> bool:
+    """Whether ``x`` is a bool option value (Python or NumPy)."""
+    return isinstance(x, (bool, np.bool_))

@@ -42,6 +42,11 @@ __all__ = ["maps_decimate", "decimate_caps", "MapsHistory", "noise_dominates", "
 #: (:func:`decision_positions`).
 NOISE_SMOOTHING_STEPS = 2
 
+#: A ring whose widest wedge in Lee et al.'s flattening reaches this multiple of pi is flattened
+#: with angles blended towards equal ones, until the widest is :data:`WEDGE_CAP` pi.
+WIDE_WEDGE = 0.9
+WEDGE_CAP = 0.8
+
 #: Rules a collapse must pass, strictest first: (cosine bound of a face's tilt, cosine of the
 #: largest corner allowed in a new face, largest ``|log a|`` of the ring's flattening exponent
 #: ``a``: sharply curved vertices, whose flattening distorts most, stay while others go).  The
@@ -60,19 +65,15 @@ NOISE_SMOOTHING_STEPS = 2
 #: bunny itself stopped at 8 of 4.  Allowing Lee et al.'s wedges up to 0.97-0.9999 pi instead
 #: reached the counts, but the near-flat wedges put input vertices up to 0.4 % of the diagonal
 #: off their own place through the map (session 21).
-_RULES = ((0.2, np.cos(np.radians(150.0)), 0.035, 0.9), (0.2, np.cos(np.radians(150.0)), 0.07, 0.9),
-          *((0.0, np.cos(np.radians(170.0)), b, 0.9) for b in (0.15, 0.3, 0.6, 1.2, 2.0)),
-          (-0.999, -2.0, np.inf, 0.9), (-0.999, -2.0, np.inf, np.inf))
+_RULES = ((0.2, np.cos(np.radians(150.0)), 0.035, WIDE_WEDGE),
+          (0.2, np.cos(np.radians(150.0)), 0.07, WIDE_WEDGE),
+          *((0.0, np.cos(np.radians(170.0)), b, WIDE_WEDGE) for b in (0.15, 0.3, 0.6, 1.2, 2.0)),
+          (-0.999, -2.0, np.inf, WIDE_WEDGE), (-0.999, -2.0, np.inf, np.inf))
 
-#: A ring whose widest wedge in Lee et al.'s flattening reaches this multiple of pi is flattened
-#: with angles blended towards equal ones, until the widest is :data:`WEDGE_CAP` pi.
-WIDE_WEDGE = 0.9
-WEDGE_CAP = 0.8
-
-#: The levels of :data:`_RULES` tried with the area cap on: when the last of them passes no
-#: collapse the cap goes, and only then the wide rings (so a decimation that never needed them
-#: makes the same collapses as before they were added).
-_CAPPED_RULES = 8
+#: The levels of :data:`_RULES` tried with the area cap on (all but the last): when the last
+#: of them passes no collapse the cap goes, and only then the wide rings (so a decimation that
+#: never needed them makes the same collapses as before they were added).
+_CAPPED_RULES = len(_RULES) - 1
 
 
 #: Weight of the ring-area term of a collapse's cost against the (normalized) quadric error

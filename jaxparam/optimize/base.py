@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import tol
 from ..errors import MeshError, SolverError
+from ..options import is_integer, is_number
 from ..progress import progress
 from .problem import Problem
 
@@ -83,15 +84,14 @@ class StopRules:
         # checked here, before any work (session 21: max_iters="5" and 2.5 reached a
         # comparison deep in the driver as TypeErrors; True ran one iteration)
         it = self.max_iters
-        if isinstance(it, bool) or not isinstance(it, (int, np.integer)) or it < 0:
+        if not is_integer(it) or it < 0:
             raise MeshError(f"minimize: max_iters must be an integer >= 0, got {it!r}.")
         for name in ("energy_rtol", "grad_rtol"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not v >= 0:
+            if not is_number(v) or not v >= 0:
                 raise MeshError(f"minimize: {name} must be a number >= 0, got {v!r}.")
         v = self.max_seconds
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating))
-                              or not v >= 0):
+        if v is not None and (not is_number(v) or not v >= 0):
             raise MeshError(f"minimize: max_seconds must be a number >= 0 or None, got {v!r}.")
 
 

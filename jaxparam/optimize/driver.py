@@ -19,6 +19,7 @@ from ..host import (face_areas as host_face_areas, face_quantities, map_aspects,
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
+from ..options import is_flag
 from .base import BoundaryOverlapWarning, CollapsedMapWarning, Solver, StopRules
 from .conformal import conformal_map, orient_disks
 from .implicit import is_traced, minimize_traced
@@ -253,7 +254,7 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
             "parameter under jax.grad captured by a lambda), which its compiled kernels cannot "
             "take; pass it as a parameter instead: jp.energy(lambda s1, s2, p: ..., params=p), "
             "and jax.grad reaches it through the implicit gradient.")
-    if not isinstance(free_boundary, (bool, np.bool_)):
+    if not is_flag(free_boundary):
         raise MeshError(f"minimize: free_boundary must be True or False, got {free_boundary!r}.")
     if free_boundary and en_mod.ENERGIES.get(en.name) is en and en.name in en_mod.NO_FREE_MINIMUM:
         raise MeshError(

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import MeshError
+from ..options import is_integer
 from .common import DPI, finish, mesh_and_uv, new_figure
 from .raster import downsample, rasterize, shading, vertex_normals, wire
 
@@ -84,7 +85,7 @@ def plot_checkerboard(mesh, uv, path=None, *, squares: int = 8, title: str | Non
         fig = jp.plot.plot_checkerboard(mesh, uv, "checker.png")
     """
     mesh, U = mesh_and_uv(mesh, uv, "plot_checkerboard")
-    if isinstance(squares, bool) or not isinstance(squares, (int, np.integer)) or squares < 1:
+    if not is_integer(squares) or squares < 1:
         raise MeshError(f"plot_checkerboard: squares must be an integer >= 1, got {squares!r}.")
     F = mesh.faces
     fin = np.all(np.isfinite(U), 1)

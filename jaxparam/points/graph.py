@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 
 from ..blocks import for_blocks
 from ..errors import PointCloudError, first_few
+from ..options import is_integer
 from ..topology import permute_rows
 from .defaults import K, K_DETECT, K_FRAME, MAX_SLOPE, MIN_NORMAL_DOT
 from .orientation import orient_normals
@@ -126,8 +127,7 @@ def point_graph(points, k: int = K, *, radius: float | None = None, symmetric: b
     if P0.ndim != 2 or P0.shape[1] != 3:
         raise PointCloudError(f"point_graph: points must be an (N, 3) array, got shape {P0.shape}.")
     N = P0.shape[0]
-    if radius is None and (isinstance(k, bool) or not isinstance(k, (int, np.integer))
-                           or not 1 <= k < N):
+    if radius is None and (not is_integer(k) or not 1 <= k < N):
         raise PointCloudError(f"point_graph: k (neighbours per point) must be an integer in "
                               f"[1, {N}) for {N} points, got {k!r}; the default is {K}.")
     # Work in a space-filling-curve order, so that neighbours sit close in memory (the tree

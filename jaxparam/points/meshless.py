@@ -14,7 +14,7 @@ from .. import boundary as bmap
 from .. import combination as comb
 from ..host import circle as host_circle
 from .. import weights as wts
-from ..options import choose
+from ..options import choose, is_integer, is_number
 from ..errors import PointCloudError, first_few
 from .boundary import detect_boundary
 from .defaults import GAP, K, MAX_SLOPE
@@ -43,7 +43,7 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
     P = np.asarray(points, np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise PointCloudError(f"meshless_map: points must have shape (N, 3), got {P.shape}.")
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+    if not is_integer(k) or k < 1:
         raise PointCloudError(f"meshless_map: k (neighbours per point) must be a positive "
                               f"integer, got {k!r}; the default is {K}.")
     if P.shape[0] < 4:      # before any reduction over the points (an empty set has no bounds)
@@ -98,7 +98,7 @@ def check_gap(where: str, gap) -> None:
     angular ``gap`` (radians) lies in ``(0, 2 pi)``: at 0 every point is a boundary candidate
     (session 21: a noisy camelhead scan came back with 2,696 faces instead of 9,836), and no
     gap reaches 2 pi."""
-    if not (isinstance(gap, (int, float, np.integer, np.floating)) and 0.0 < float(gap) < 2.0 * np.pi):
+    if not (is_number(gap) and 0.0 < float(gap) < 2.0 * np.pi):
         raise PointCloudError(f"{where}: gap is the angular gap (radians) that makes a point a "
                               f"boundary candidate and must lie in (0, 2 pi), got {gap!r}; the "
                               f"default is {GAP:.4f} (0.7 pi).")

@@ -15,11 +15,12 @@ from ..progress import StageBar
 from ..errors import PointCloudError, first_few
 from ..memory import reuse_freed_memory
 from ..mesh import TriMesh
+from ..options import is_integer, is_number
 from ..topology import half_edge_twins
 from .boundary import detect_boundary
 from .defaults import (BRIDGE_FACTOR, CHORD_ROUNDS, FLIP_ROUNDS, GAP, HOLE_FACES, HOLE_INRADIUS,
-                       HOLE_REFERENCE_POINTS, HOLE_SHARE, K, K_DETECT,
-                       K_FRAME, MAX_SLOPE, OUTLIER_ROUNDS)
+                       HOLE_REFERENCE_POINTS, HOLE_SHARE, K, K_DETECT, K_FRAME, MAX_SLOPE,
+                       OUTLIER_ROUNDS)
 from .graph import (Frames, global_frame, nearest_neighbours, point_graph_in_order, refresh_frames,
                     robust_frames, unreachable)
 from .outliers import drop_points, find_outliers
@@ -27,10 +28,9 @@ from .smoothing import SMOOTHING, smooth_points
 from .squeeze import SQUEEZED_SHARE, SqueezedMapWarning, squeeze_message, squeezed_share
 from .meshless import (check_boundary_indices, check_gap, check_map_options, check_points,
                        map_points, symmetric_solve)
-from .triangulation import (delaunay, flip_towards_3d_delaunay, largest_manifold_disk,
-                            interior_holes, lone_points, long_faces, longest_edges, onto_chords,
-                            outside_bridges,
-                            peel_ears)
+from .triangulation import (delaunay, flip_towards_3d_delaunay, interior_holes,
+                            largest_manifold_disk, lone_points, long_faces, longest_edges,
+                            onto_chords, outside_bridges, peel_ears)
 
 __all__ = ["Reconstruction", "reconstruct_surface"]
 
@@ -105,8 +105,8 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
     is kept.  ``holes``: such long faces inside the surface open a hole where they span an
     empty disk whose edge points see an angular gap larger than ``gap`` (a hole in the scan:
     :func:`~jaxparam.points.triangulation.interior_holes` with ``HOLE_SHARE``,
-    ``HOLE_INRADIUS`` (widened for large sets) and ``HOLE_FACES``); the mesh is then a disk with holes, its UVs still
-    one-to-one (``holes=False`` bridges them, as a disk).
+    ``HOLE_INRADIUS`` (widened for large sets) and ``HOLE_FACES``); the mesh is then a disk
+    with holes, its UVs still one-to-one (``holes=False`` bridges them, as a disk).
 
     An interior point that the map puts on a chord of the boundary polygon (a boundary point
     the detection missed) would get a face of zero parameter area: it joins the polygon
@@ -145,13 +145,12 @@ def reconstruct_surface(points, *, k: int = K, weights: str = "shape_preserving"
             "own maps (e.g. jp.convex_map(jp.TriMesh(P, rec.mesh.faces))) instead.")
     weights, boundary, spacing = check_map_options("reconstruct_surface", weights, boundary, spacing)
     check_gap("reconstruct_surface", gap)
-    if not (isinstance(bridge_factor, (int, float, np.integer, np.floating)) and bridge_factor > 1.0):
+    if not (is_number(bridge_factor) and bridge_factor > 1.0):
         raise PointCloudError("reconstruct_surface: bridge_factor (how many local spacings a "
                               "face's longest edge may span before it counts as a bridge) must be "
                               f"a number above 1, got {bridge_factor!r}; the default is "
                               f"{BRIDGE_FACTOR}.")
-    if not (isinstance(flip_rounds, (int, np.integer)) and not isinstance(flip_rounds, bool)
-            and flip_rounds >= 0):
+    if not (is_integer(flip_rounds) and flip_rounds >= 0):
         raise PointCloudError("reconstruct_surface: flip_rounds (rounds of 3D Delaunay edge "
                               f"flips; 0 turns them off) must be an integer >= 0, got "
                               f"{flip_rounds!r}.")

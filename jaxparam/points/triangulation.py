@@ -266,6 +266,15 @@ def lone_points(F: np.ndarray, long: np.ndarray, n: int, keep: np.ndarray) -> np
     return np.flatnonzero(lone)
 
 
+def _bad_neighbours(bad: np.ndarray, twin: np.ndarray):
+    """``(a, b)``: the pairs of faces both flagged ``bad (m,) bool`` that share an edge, each
+    pair once (``twin`` the faces' :func:`~jaxparam.topology.half_edge_twins`)."""
+    h = np.flatnonzero(twin > np.arange(twin.size))          # each interior edge once
+    a, b = h // 3, twin[h] // 3
+    both = bad[a] & bad[b]
+    return a[both], b[both]
+
+
 def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int, *,
                     twin: np.ndarray | None = None) -> np.ndarray:
     """``(m,) bool``: the faces flagged ``bad (m,) bool`` that reach the triangulation's
@@ -273,14 +282,12 @@ def outside_bridges(F: np.ndarray, bad: np.ndarray, n: int, *,
     :func:`~jaxparam.topology.half_edge_twins`, if known)."""
     m = len(F)
     twin = half_edge_twins(F, n) if twin is None else twin
-    h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
-    a, b = h // 3, twin[h] // 3
-    both = bad[a] & bad[b]
+    a, b = _bad_neighbours(bad, twin)
     hull_faces = np.unique(np.flatnonzero(twin < 0) // 3)
     hull_faces = hull_faces[bad[hull_faces]]
     out = m
-    rows = np.concatenate([a[both], b[both], np.full(hull_faces.size, out)])
-    cols = np.concatenate([b[both], a[both], hull_faces])
+    rows = np.concatenate([a, b, np.full(hull_faces.size, out)])
+    cols = np.concatenate([b, a, hull_faces])
     G = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(m + 1, m + 1))
     reached = breadth_first_order(G, out, directed=False, return_predecessors=False)
     mask = np.zeros(m + 1, bool)
@@ -306,11 +313,8 @@ def interior_holes(F: np.ndarray, P: np.ndarray, bad: np.ndarray, rim: np.ndarra
     if not bad.any():
         return np.zeros(m, bool)
     twin = half_edge_twins(F, n) if twin is None else twin
-    h = np.flatnonzero(twin > np.arange(3 * m))          # each interior edge once
-    a, b = h // 3, twin[h] // 3
-    both = bad[a] & bad[b]
-    G = sp.csr_matrix((np.ones(2 * int(both.sum())), (np.r_[a[both], b[both]], np.r_[b[both], a[both]])),
-                      shape=(m, m))
+    a, b = _bad_neighbours(bad, twin)
+    G = sp.csr_matrix((np.ones(2 * a.size), (np.r_[a, b], np.r_[b, a])), shape=(m, m))
     _, label = connected_components(G, directed=False)
     ids = np.flatnonzero(bad)
     group = label[ids]
