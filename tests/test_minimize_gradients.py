@@ -146,6 +146,30 @@ def test_d_free_boundary_gradient_wrt_vertices(setup, name):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("name", ["mips", "arap"])
+def test_d_free_boundary_gradient_at_a_conformal_corner(name):
+    """A grid's corner vertex has one face, which a free-boundary optimum makes exactly
+    conformal (s1 = s2): the Hessian there must come from the energy's invariants, not the
+    singular values' chain (0 / 0 at s1 = s2), or the backward solve is wrong.  Before the
+    fix MIPS's gradient at corner vertex 30 was -2.97e-2 against finite differences' -1.78e-2.
+    Loss: a ratio of two squared UV distances (similarity-invariant).  Measured 1e-9 (h =
+    1e-4); 1e-6 asked."""
+    m = jp.shapes.graph_surface(6, jitter=0.1)
+    F = m.faces
+
+    def loss(V):
+        uv = jp.minimize(jp.TriMesh(V, F), name, free_boundary=True, **TIGHT).uv
+        d = lambda a, b: jnp.sum((uv[a] - uv[b]) ** 2)
+        return d(0, 1) / d(2, 30)
+
+    for i, j in ((30, 0), (31, 1)):
+        e = np.zeros(m.vertices.shape)
+        e[i, j] = 1.0
+        err, _ = check_fd(loss, jnp.asarray(m.vertices), e, 1e-4)
+        assert err < RTOL, (i, j, err)
+
+
+@pytest.mark.slow
 def test_d_free_boundary_scale_invariant_gradient_wrt_init(setup):
     """A free-boundary MIPS result is recentred and rescaled to the start's centroid and area,
     so it depends on ``init`` through them (only): the gradient matches finite differences
@@ -303,3 +327,18 @@ def test_g_vmap_and_jit_through_minimize():
     assert float(jax.jit(loss)(Vs[0])) == pytest.approx(traced_value(loss, Vs[0]), rel=1e-12)
     np.testing.assert_allclose(np.asarray(jax.jit(jax.grad(loss))(Vs[0])),
                                np.asarray(jax.grad(loss)(Vs[0])), rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("transform", ["jvp", "jacfwd"])
+def test_forward_mode_is_refused_with_the_reverse_mode_remedy(transform):
+    """``minimize``'s derivative is a custom VJP: forward mode gets a SolverError naming
+    jax.jacrev, not JAX's bare TypeError (eagerly; under jax.jit JAX differentiates the
+    traced function after minimize has returned, and raises its own TypeError)."""
+    m = jp.shapes.graph_surface(4, jitter=0.1)
+    V = jnp.asarray(m.vertices)
+    f = lambda V: jp.minimize(jp.TriMesh(V, m.faces), "symmetric_dirichlet", max_iters=5,
+                              verbose=False).uv
+    run = {"jvp": lambda: jax.jvp(f, (V,), (jnp.ones_like(V),)),
+           "jacfwd": lambda: jax.jacfwd(f)(V)}[transform]
+    with pytest.raises(SolverError, match=r"forward-mode.*jax\.jacrev"):
+        run()

@@ -48,7 +48,12 @@ quoted).
 **Transformations.**  Every host callback is pure (its result depends only on its
 arguments) and has ``vmap_method="sequential"``: ``jax.vmap`` runs one minimization per
 batch element, and ``jax.jit`` works (the minimization then runs when the compiled
-function is called).
+function is called).  Forward mode (``jax.jvp``, ``jax.jacfwd``) is refused with a
+:class:`~jaxparam.errors.SolverError` that names ``jax.jacrev``: JAX cannot push a tangent
+through a custom VJP, and a custom JVP instead would need the forward solve's tangent
+system (``H dx = -d(grad_x E)``) to be transposable JAX code, while its Hessian, null space
+and polish live on the host.  (Under ``jax.jit`` JAX differentiates the traced function
+after ``minimize`` has returned, so there its own ``TypeError`` comes instead.)
 """
 from __future__ import annotations
 
@@ -311,7 +316,17 @@ def minimize_traced(mesh, en, base, free_boundary: bool, solver: Solver, stop: S
 
     fl = tuple(a for a, f in zip(leaves, is_float) if f)
     il = tuple(a for a, f in zip(leaves, is_float) if not f)
-    x, energy, iterations, converged, flips = optimum(V, base, fl, il)
+    try:
+        x, energy, iterations, converged, flips = optimum(V, base, fl, il)
+    except TypeError as exc:
+        if "forward-mode" not in str(exc):
+            raise
+        raise SolverError(
+            "minimize: forward-mode differentiation (jax.jvp, jax.jacfwd, jax.hessian) is not "
+            "supported: the optimum's derivative is a reverse-mode rule (a custom VJP around "
+            "the host solver and the backward solve). Use jax.grad, jax.vjp or jax.jacrev "
+            "(one backward solve per output row); for second derivatives differentiate "
+            "something else than minimize's output twice.", stage="gradient") from None
     if free_boundary and en.scale_invariant:
         x = normalized(x, base, free, F)       # a no-op on the values; differentiates the
     uv = uv_of(x, base, free)                  # dependence on the start's centroid and area
