@@ -157,6 +157,14 @@ class Energy:
         """The same energy with other parameters (e.g. traced ones)."""
         return dataclasses.replace(self, params=params)
 
+    def __reduce__(self):
+        # A named energy (or one with other parameters) pickles by its name: its functions
+        # are lambdas, which pickle cannot store; a user's energy pickles field by field.
+        named = ENERGIES.get(self.name)
+        if named is not None and named.density is self.density:
+            return _named_energy, (self.name, self.params)
+        return super().__reduce__()
+
     def densities(self, params=None) -> Densities:
         """The density, ``of_J`` and ``of_sv`` with ``params`` (default: :attr:`params`)
         bound, each taking its usual arguments (``(frame, q)``, ``J``, ``(s1, s2)``)."""
@@ -554,6 +562,12 @@ ENERGIES: dict[str, Energy] = {
     "stretch": _from_sv("stretch", lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2),
                         invariants=lambda tr, d: 0.5 * tr / (d * d)),
 }
+
+
+def _named_energy(name: str, params) -> Energy:
+    """``ENERGIES[name]`` with ``params`` (unpickling, :meth:`Energy.__reduce__`)."""
+    en = ENERGIES[name]
+    return en if params is None else en.with_params(params)
 
 
 def _captured(fn, depth: int = 0):

@@ -20,6 +20,7 @@ iso-curves of ``s`` (Fig. 6 uniform vs Fig. 8 shape-preserving).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import jax
@@ -56,6 +57,10 @@ class Surface:
     arrays; when the data (:func:`fit_surface` called under ``jax.grad``) or ``uv``
     are traced they are JAX arrays, differentiable in both (``residual_rms`` is then a
     JAX scalar too).
+
+    Pickles (for ``multiprocessing``, ``joblib``, caches) when fitted to concrete data: as
+    the points and parameters it was fitted to, fitted again on loading (the same values,
+    bit for bit).  A surface fitted to traced data refuses to pickle.
     """
 
     kind: str
@@ -63,6 +68,15 @@ class Surface:
     _eval: object
     residual_rms: float
     _defined: object = None
+    #: ``(points (N, 3), uv (N, 2), kind, knots, smoothing)`` of a fit to concrete data
+    _source: tuple | None = None
+
+    def __reduce__(self):
+        if self._source is None:
+            raise MeshError("fit_surface: a Surface fitted to traced points or parameters (under "
+                            "jax.grad or jax.jit) cannot be pickled; fit it again from concrete "
+                            "arrays, or pickle the arrays.")
+        return _refit, self._source
 
     def evaluate(self, uv):
         if isinstance(uv, jax.core.Tracer):
@@ -212,8 +226,17 @@ def fit_surface(mesh_or_points, uv, *, kind: str = "spline", knots: int | None =
     lo, hi = Uc.min(0), Uc.max(0)
     bbox = ((float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1])))
     if kind == "clough_tocher":
-        return _clough_tocher(U, X, Uc, Xc, bbox)
-    return _spline(U, X, Uc, lo, hi, bbox, knots, float(smoothing))
+        surf = _clough_tocher(U, X, Uc, Xc, bbox)
+    else:
+        surf = _spline(U, X, Uc, lo, hi, bbox, knots, float(smoothing))
+    if _traced(U, X):
+        return surf
+    return dataclasses.replace(surf, _source=(Xc, Uc, kind, knots, float(smoothing)))
+
+
+def _refit(points, uv, kind, knots, smoothing) -> Surface:
+    """A pickled :class:`Surface`, fitted again (``Surface.__reduce__``)."""
+    return fit_surface(points, uv, kind=kind, knots=knots, smoothing=smoothing)
 
 
 # ---------------------------------------------------------------------------------------------
