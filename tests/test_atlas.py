@@ -244,6 +244,21 @@ def test_packing_with_wide_margins_fits_or_says_at_once_that_it_cannot():
         pack.pack_charts(uv, uf, chart, uvc, area, texture_size=16, margin_texels=2)
 
 
+def test_grown_masks_are_the_square_dilation():
+    """The occupancy's margin: ``pack.grown`` (a running maximum along each axis) is the
+    dilation by the full ``(2 m + 1)`` square that it replaced (283 of 302 s of cow's atlas at
+    64-texel margins), on random masks and margins 0-40 cells."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(0)
+    for m in (0, 1, 2, 7, 40):
+        for _ in range(10):
+            M = rng.random(rng.integers(1, 50, 2)) < rng.random()
+            want = (ndimage.binary_dilation(np.pad(M, m), np.ones((2 * m + 1,) * 2, bool))
+                    if m else M)
+            np.testing.assert_array_equal(pack.grown(M, m), want)
+
+
 def _u_and_blobs():
     """A 40-cell U-shaped mask, then 14 elliptic blobs of radius 2.5-9 cells (seeded)."""
     U = np.ones((40, 40), bool)

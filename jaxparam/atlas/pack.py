@@ -49,7 +49,7 @@ import numpy as np
 from ..errors import SolverError
 
 __all__ = ["Packing", "min_area_rotation", "min_square_rotation", "rasterize", "pack_charts",
-           "place_square", "fill_square", "fill_contact"]
+           "place_square", "fill_square", "fill_contact", "grown"]
 
 
 @dataclass(frozen=True)
@@ -330,7 +330,6 @@ def place_square(masks, cap: int, margin: int, order: np.ndarray | None = None):
     W = H = 0
     pos = np.zeros((len(masks), 2), np.int64)
     turn = np.zeros(len(masks), np.int64)
-    st = np.ones((2 * margin + 1, 2 * margin + 1), bool) if margin else None
     if order is None:
         order = np.argsort([-m.sum() for m in masks], kind="stable")
     for c in order:
@@ -346,7 +345,7 @@ def place_square(masks, cap: int, margin: int, order: np.ndarray | None = None):
         _, t, i, j, M = best
         h, w = M.shape
         # the occupancy keeps the mask grown by `margin` cells on each side
-        js, je, is_, ie = _paint(occb, M, i, j, margin, st)
+        js, je, is_, ie = _paint(occb, M, i, j, margin)
         occ[js:je, is_:ie] = occb[js:je, is_:ie]
         W, H = max(W, i + w), max(H, j + h)
         pos[c] = (i, j)
@@ -354,13 +353,26 @@ def place_square(masks, cap: int, margin: int, order: np.ndarray | None = None):
     return pos, turn, max(W, H, 1)
 
 
-def _paint(occb, M, i, j, margin, st):
-    """Mark the mask ``M`` placed at cell ``(i, j)``, grown by ``margin`` cells, in ``occb``;
-    **returns** the rows and columns touched, ``(js, je, is_, ie)``."""
+def grown(M: np.ndarray, margin: int) -> np.ndarray:
+    """The mask ``M (h, w)`` padded by ``margin`` cells and dilated by the ``(2 margin + 1)``
+    square, ``(h + 2 margin, w + 2 margin)`` bool: a running maximum along each axis (the
+    square is separable; ``binary_dilation`` with it costs ``(2 margin + 1)^2`` per cell:
+    283 of 302 s of cow's atlas with 64-texel margins)."""
     from scipy import ndimage
 
+    if not margin:
+        return M
+    D = np.pad(M, margin).astype(np.uint8)
+    for axis in (0, 1):
+        D = ndimage.maximum_filter1d(D, 2 * margin + 1, axis=axis, mode="constant", cval=0)
+    return D.astype(bool)
+
+
+def _paint(occb, M, i, j, margin):
+    """Mark the mask ``M`` placed at cell ``(i, j)``, grown by ``margin`` cells, in ``occb``;
+    **returns** the rows and columns touched, ``(js, je, is_, ie)``."""
     cap_r, cap_c = occb.shape
-    D = ndimage.binary_dilation(np.pad(M, margin), st) if margin else M
+    D = grown(M, margin)
     j0, i0 = j - margin, i - margin
     js, is_ = max(j0, 0), max(i0, 0)
     je, ie = min(j0 + D.shape[0], cap_r), min(i0 + D.shape[1], cap_c)
@@ -412,7 +424,6 @@ def _fill(masks, size: int, margin: int, order, place):
     (default largest first), each where ``place(turns, occupied, size)`` puts it (``(key,
     turn, i, j, mask)`` or ``None``), then painted with its margin."""
     occb = np.zeros((size, size), bool)
-    st = np.ones((2 * margin + 1, 2 * margin + 1), bool) if margin else None
     pos = np.zeros((len(masks), 2), np.int64)
     turn = np.zeros(len(masks), np.int64)
     if order is None:
@@ -424,7 +435,7 @@ def _fill(masks, size: int, margin: int, order, place):
         if best is None:
             return None
         _, t, i, j, M = best
-        _paint(occb, M, i, j, margin, st)
+        _paint(occb, M, i, j, margin)
         pos[c] = (i, j)
         turn[c] = t
     return pos, turn, size
