@@ -203,6 +203,20 @@ def test_unknown_extension_is_refused_before_any_work(tmp_path, name):
         io.check_output_format(tmp_path / "d.obj")
 
 
+def test_arguments_in_the_wrong_order_are_refused_with_the_right_call(tmp_path, mesh_uv):
+    """``jp.save(mesh, path)`` (trimesh's ``mesh.export(path)`` order) and ``jp.load(mesh)``
+    raised pathlib's TypeError ("expected str, bytes or os.PathLike object, not TriMesh")."""
+    mesh, _ = mesh_uv
+    with pytest.raises(MeshFileError, match=r"save: the file must be given by its path .*got TriMesh; "
+                                            r"the path comes first: jp\.save\('out\.obj', mesh, uv\)"):
+        jp.save(mesh, tmp_path / "out.obj")
+    with pytest.raises(MeshFileError, match=r"load: .*got TriMesh; a mesh in memory needs no loading"):
+        jp.load(mesh)
+    with pytest.raises(MeshFileError, match=r"reading a point file: .*got NoneType"):
+        jp.load_points(None)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_glb_with_embedded_checker_texture(tmp_path, mesh_uv):
     mesh, uv = mesh_uv
     img = io.checker_texture(64, 8)

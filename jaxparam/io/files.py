@@ -16,16 +16,29 @@ import numpy as np
 
 from ..errors import MeshFileError
 
-__all__ = ["existing_file", "read_text", "atomic_write", "write_rows"]
+__all__ = ["file_path", "existing_file", "read_text", "atomic_write", "write_rows"]
+
+
+def file_path(path, where: str, hint: str = "") -> Path:
+    """``path`` (a ``str`` or ``os.PathLike``) as a :class:`~pathlib.Path`.
+
+    Raises :class:`MeshFileError` naming ``where`` and the type given otherwise (a mesh or an
+    array passed where the file name goes: ``jp.save(mesh, "out.obj")``), followed by
+    ``hint``, instead of pathlib's ``TypeError``."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise MeshFileError(f"{where}: the file must be given by its path (a str or "
+                            f"os.PathLike), got {type(path).__name__}{hint}.")
+    return Path(path)
 
 
 def existing_file(path, *, what: str = "mesh file") -> Path:
     """``path`` as a :class:`~pathlib.Path`, checked to name an existing file.
 
     Raises :class:`MeshFileError` (``"{path}: no such file."``, ``"{path}: is a folder, not a
-    {what}."``) otherwise; messages show ``path`` as given.
+    {what}."``, or a path that is not a path: :func:`file_path`) otherwise; messages show
+    ``path`` as given.
     """
-    p = Path(path)
+    p = file_path(path, f"reading a {what}")
     if not p.exists():
         raise MeshFileError(f"{path}: no such file.")
     if p.is_dir():

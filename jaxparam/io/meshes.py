@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import MeshError, MeshFileError, first_few
 from ..mesh import TriMesh
-from .files import atomic_write, existing_file
+from .files import atomic_write, existing_file, file_path
 from .gltf import gltf_bytes, read_gltf
 from .interop import as_mesh, split_seams, to_trimesh
 from .obj import corner_to_vertex_uv, parse_obj, read_obj, write_obj
@@ -50,8 +50,9 @@ def check_output_format(path) -> str:
 
         jp.io.check_output_format("out.stl")   # MeshFileError: cannot write '.stl' ...
     """
-    ext = Path(path).suffix.lower()
-    if Path(path).is_dir():
+    p = file_path(path, "save", "; the path comes first: jp.save('out.obj', mesh, uv)")
+    ext = p.suffix.lower()
+    if p.is_dir():
         raise MeshFileError(f"{path}: is a folder; give a file path ending in one of "
                             f"{', '.join(WRITE_FORMATS)}.")
     if ext not in WRITE_FORMATS:
@@ -80,7 +81,8 @@ def load(path, *, validate: bool = True) -> TriMesh:
 
         mesh = jp.load("camelhead.off")
     """
-    p = Path(path)
+    p = file_path(path, "load", "; a mesh in memory needs no loading (jp.TriMesh(V, F), or "
+                  "jp.io.from_trimesh for a trimesh.Trimesh)")
     ext = p.suffix.lower()
     uv = tex = T = None
     if ext == ".obj":
