@@ -27,8 +27,8 @@ import sys as _sys
 import types as _types
 
 from .errors import (  # cheap: no numpy
-    DegenerateFaceError, JaxparamError, MeshError, MeshFileError, NonManifoldError,
-    PointCloudError, SolverError, TopologyError,
+    ArgumentTypeError, DegenerateFaceError, JaxparamError, MeshError, MeshFileError,
+    NonManifoldError, PointCloudError, SolverError, TopologyError,
 )
 from .lazy_jax import when_jax_loads as _when_jax_loads
 from .settings import config, configure_jax as _configure_jax
@@ -104,7 +104,7 @@ _sys.modules[__name__].__class__ = _Package
 __all__ = [
     "TriMesh", "load", "save", "convex_map", "least_squares_map", "distortion",
     "DistortionReport", "JaxparamError", "MeshError", "NonManifoldError", "TopologyError",
-    "DegenerateFaceError", "PointCloudError", "MeshFileError", "SolverError",
+    "DegenerateFaceError", "PointCloudError", "MeshFileError", "SolverError", "ArgumentTypeError",
     "errors", "tol", "topology", "geometry", "boundary", "weights", "sparse", "linear",
     "metrics", "shapes", "energies", "optimize", "energy", "Energy", "ENERGIES", "minimize",
     "MinimizeResult", "points", "load_points", "meshless_map", "reconstruct_surface",

@@ -49,6 +49,7 @@ import numpy as np
 from . import geometry as geo
 from . import tol
 from .errors import MeshError
+from .io import as_mesh
 
 __all__ = ["Energy", "Densities", "energy", "ENERGIES", "get", "mips_prop2", "total",
            "params_equal", "captures_tracer", "density_stretch", "NO_FREE_MINIMUM"]
@@ -181,6 +182,10 @@ class Energy:
         the derivative is written by hand (:func:`_mesh_energy`): the values are the
         density's own, bit for bit, and a gradient costs about two forward passes (three
         times less than JAX's derivative of the same formula; benchmarks/README.md)."""
+        mesh = as_mesh(mesh, f"energy {self.name!r} (called as energy(mesh, uv))")
+        if np.shape(uv) != (mesh.n_vertices, 2):
+            raise MeshError(f"energy {self.name!r}: uv must have shape ({mesh.n_vertices}, 2), one "
+                            f"row per vertex of the mesh, got {np.shape(uv)}.")
         V = jnp.asarray(mesh.vertices, jnp.float64)
         if (isinstance(self.density, _OfJacobian) and V.ndim == 2 and V.shape[1] == 3
                 and isinstance(self.of_J, (_SingularValueForm, _JacobianForm))):

@@ -2,7 +2,7 @@
 
 Every error raised on bad input is a :class:`JaxparamError`, and each kind also
 subclasses the builtin users already catch (``ValueError``, ``OSError``,
-``RuntimeError``).  Messages name the function, the offending elements (the
+``RuntimeError``, ``TypeError``).  Messages name the function, the offending elements (the
 first few and the count) and the remedy.
 """
 from __future__ import annotations
@@ -18,6 +18,7 @@ __all__ = [
     "PointCloudError",
     "MeshFileError",
     "SolverError",
+    "ArgumentTypeError",
     "first_few",
 ]
 
@@ -48,6 +49,11 @@ class PointCloudError(JaxparamError, ValueError):
 
 class MeshFileError(JaxparamError, OSError):
     """A mesh or point file is missing, unreadable or malformed."""
+
+
+class ArgumentTypeError(JaxparamError, TypeError):
+    """An argument of the wrong kind: an array where a mesh goes, a mesh where points go
+    (also a ``TypeError``, which such mistakes raise in Python)."""
 
 
 class SolverError(JaxparamError, RuntimeError):

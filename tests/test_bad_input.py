@@ -408,3 +408,26 @@ def test_plots_take_a_vertices_faces_pair_and_a_manifold_map_prints_one_line(tmp
     _, param = jp.manifold_map(jp.shapes.sphere(1), 8, verbose=False)
     assert repr(param) == ("ManifoldParameterization(mesh=" + repr(param.mesh) + ", 8 base faces "
                            f"over {len(param.base_vertices)} base vertices, method='maps')")
+
+
+# Found in QA (session 22, arguments swapped or of the wrong kind): a mesh passed where points
+# go reached float() deep in numpy; energy(uv, mesh) an AttributeError; energy(mesh, uv) with
+# too few UV rows returned a number (JAX clamps out-of-range gathers), silently wrong.
+@pytest.mark.parametrize("call, kind, match", [
+    (lambda m, uv: jp.meshless_map(m), jp.ArgumentTypeError,
+     r"meshless_map: points must be an \(N, 3\) array, got a mesh \(TriMesh\); pass its vertices"),
+    (lambda m, uv: jp.reconstruct_surface(m), jp.ArgumentTypeError, r"pass its vertices \(mesh\.vertices\)"),
+    (lambda m, uv: jp.meshless_map([[0, 1, "a"]] * 5), jp.ArgumentTypeError,
+     r"points must be an \(N, 3\) array of numbers, got list"),
+    (lambda m, uv: jp.ENERGIES["mips"](uv, m), jp.ArgumentTypeError,
+     r"energy 'mips' \(called as energy\(mesh, uv\)\): expected a jaxparam TriMesh"),
+    (lambda m, uv: jp.ENERGIES["mips"](m, uv[:5]), MeshError,
+     r"energy 'mips': uv must have shape \(\d+, 2\), one row per vertex of the mesh, got \(5, 2\)"),
+    (lambda m, uv: jp.distortion(uv, m), TypeError, r"distortion: expected a jaxparam TriMesh"),
+    (lambda m, uv: jp.atlas(np.asarray(m.vertices)), jp.JaxparamError, r"atlas: expected a jaxparam TriMesh"),
+])
+def test_arguments_of_the_wrong_kind_get_the_library_s_error(grid_mesh, call, kind, match):
+    uv = np.asarray(jp.convex_map(grid_mesh))
+    with pytest.raises(kind, match=match) as info:
+        call(grid_mesh, uv)
+    assert isinstance(info.value, jp.JaxparamError)

@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from ..errors import MeshError
+from ..errors import ArgumentTypeError, MeshError
 from ..mesh import TriMesh
 
 __all__ = ["to_trimesh", "from_trimesh", "as_mesh", "split_seams"]
@@ -88,7 +88,8 @@ def from_trimesh(t, *, validate: bool = True) -> TriMesh:
     """A :class:`TriMesh` from a ``trimesh.Trimesh``, vertex order kept, nothing merged; its
     ``TextureVisuals`` UVs (one per vertex) become ``mesh.uv``.
 
-    Raises ``TypeError`` for anything but a ``trimesh.Trimesh`` (a ``Scene``: take
+    Raises :class:`~jaxparam.errors.ArgumentTypeError` (a ``TypeError``) for anything but
+    a ``trimesh.Trimesh`` (a ``Scene``: take
     ``scene.to_geometry()`` first) and :class:`MeshError` for an invalid mesh.
 
     Example::
@@ -96,7 +97,7 @@ def from_trimesh(t, *, validate: bool = True) -> TriMesh:
         mesh = jp.from_trimesh(trimesh.load("bunny.ply", process=False))
     """
     if not _is_trimesh(t):
-        raise TypeError(f"from_trimesh: expected a trimesh.Trimesh, got {type(t).__module__}."
+        raise ArgumentTypeError(f"from_trimesh: expected a trimesh.Trimesh, got {type(t).__module__}."
                         f"{type(t).__qualname__}" + ("; for a Scene take scene.to_geometry() first."
                                                      if type(t).__name__ == "Scene" else "."))
     V = np.asarray(t.vertices, np.float64)
@@ -111,7 +112,8 @@ def as_mesh(obj, what: str = "mesh") -> TriMesh:
     """``obj`` as a :class:`TriMesh`: a ``TriMesh`` as it is, a ``trimesh.Trimesh`` through
     :func:`from_trimesh`, a ``(vertices (n, 3), faces (m, 3))`` pair through ``TriMesh``.
 
-    Raises ``TypeError`` naming the type it got for anything else (``what`` names the
+    Raises :class:`~jaxparam.errors.ArgumentTypeError` (a ``TypeError``) naming the type it
+    got for anything else (``what`` names the
     argument in the message, e.g. ``"convex_map"``).
 
     Example::
@@ -127,5 +129,5 @@ def as_mesh(obj, what: str = "mesh") -> TriMesh:
     kind = type(obj)
     got = kind.__qualname__ if kind.__module__ == "builtins" else f"{kind.__module__}.{kind.__qualname__}"
     extra = f" of length {len(obj)}" if isinstance(obj, (tuple, list)) else ""
-    raise TypeError(f"{what}: expected a jaxparam TriMesh, a trimesh.Trimesh or a (vertices, faces) "
+    raise ArgumentTypeError(f"{what}: expected a jaxparam TriMesh, a trimesh.Trimesh or a (vertices, faces) "
                     f"pair, got {got}{extra}; e.g. jp.TriMesh(V, F) or jp.load('mesh.obj').")

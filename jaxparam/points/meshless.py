@@ -15,7 +15,7 @@ from .. import combination as comb
 from ..host import circle as host_circle
 from .. import weights as wts
 from ..options import choose, is_integer, is_number
-from ..errors import PointCloudError, first_few
+from ..errors import ArgumentTypeError, PointCloudError, first_few
 from .boundary import detect_boundary
 from .defaults import GAP, K, MAX_SLOPE
 from .graph import PointGraph, morton_keys, point_graph
@@ -40,7 +40,15 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
     the later copies are dropped, ``kept`` says which points remain and ``index`` maps a
     copy to its first occurrence) and point sets that are collinear or coincident.
     """
-    P = np.asarray(points, np.float64)
+    if hasattr(points, "vertices") and hasattr(points, "faces"):
+        raise ArgumentTypeError(f"meshless_map: points must be an (N, 3) array, got a mesh "
+                                f"({type(points).__name__}); pass its vertices (mesh.vertices), "
+                                "or flatten the mesh itself with jp.convex_map.")
+    try:
+        P = np.asarray(points, np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ArgumentTypeError(f"meshless_map: points must be an (N, 3) array of numbers, got "
+                                f"{type(points).__name__} ({exc}).") from None
     if P.ndim != 2 or P.shape[1] != 3:
         raise PointCloudError(f"meshless_map: points must have shape (N, 3), got {P.shape}.")
     if not is_integer(k) or k < 1:
