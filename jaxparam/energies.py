@@ -202,6 +202,14 @@ def total(en: Energy, frames, areas, Q, params=None):
     return jnp.sum(areas * dens) / jnp.sum(areas)
 
 
+#: A symmetric user energy of the singular values is evaluated by its expansion in
+#: ``S = ((s1 - s2) / 2)^2`` where ``S`` is below this times ``((s1 + s2) / 2)^2`` (``s1 - s2``
+#: below 2e-4 of ``s1 + s2``): there the exact formula's second derivative loses about
+#: ``eps (s1 + s2)^2 / (s1 - s2)^2`` (1e-8 at the threshold) and the expansion's two terms
+#: are off by about as much (:meth:`_SingularValueForm.of_QS`).
+SYMMETRIC_TAYLOR = 1e-8
+
+
 def _barrier(det, value):
     """``value`` where ``det > 0``, ``+inf`` elsewhere, with finite gradients on both sides."""
     return jnp.where(det > 0, value, jnp.inf)
@@ -233,9 +241,17 @@ class _SingularValueForm:
     fn: Callable
     barrier: bool
     invariants: Callable | None = None
+    symmetric: bool = False
 
     def __call__(self, J, *params):
         det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+        if self.symmetric and self.invariants is None:
+            if self.barrier:                # inverted: +inf, with finite gradients
+                J = jnp.where(det > 0, J, jnp.eye(2))
+            E, F = 0.5 * (J[0, 0] + J[1, 1]), 0.5 * (J[0, 0] - J[1, 1])
+            G, H = 0.5 * (J[1, 0] + J[0, 1]), 0.5 * (J[1, 0] - J[0, 1])
+            value = self.of_QS(_root(E * E + H * H)[0], F * F + G * G, params)
+            return _barrier(det, value) if self.barrier else value
         if self.invariants is not None:
             # tr and det J are polynomials of J: no singular value's square root, so the
             # second derivative has no 0 / 0 at a conformal face (s1 = s2), where the
@@ -252,11 +268,28 @@ class _SingularValueForm:
         s1_safe = jnp.where(det > 0, s1, 1.0)
         return _barrier(det, self.fn(s1_safe, s2_safe, *params))
 
+    def of_QS(self, Q, S, params=()):
+        """A symmetric ``fn`` as a function of ``Q = (s1 + s2) / 2`` and ``S = ((s1 - s2) /
+        2)^2``, smooth in both: ``fn(Q + sqrt S, Q - sqrt S)`` (``|s2|`` without a barrier), and
+        where ``S < SYMMETRIC_TAYLOR * Q^2`` its expansion ``g(0) + g''(0) S / 2`` in ``S``
+        (``g(r) = fn(Q + r, Q - r)``, even: its odd terms vanish), so that no derivative divides
+        by ``s1 - s2`` (0 / 0 at a conformal face: the singular values' chain has no Hessian
+        there).  Scalars (one face)."""
+        small = S < SYMMETRIC_TAYLOR * Q * Q
+        # the branch not taken is evaluated at a harmless place (finite values and derivatives)
+        R = jnp.where(small, 0.5 * Q, _root(jnp.where(small, 1.0, S))[0])
+        s2 = Q - R if self.barrier else jnp.abs(Q - R)
+        exact = self.fn(Q + R, s2, *params)
+        Qs = jnp.where(small, Q, 1.0)
+        g = lambda r: self.fn(Qs + r, Qs - r, *params)
+        taylor = g(0.0) + 0.5 * jax.grad(jax.grad(g))(0.0) * S
+        return jnp.where(small, taylor, exact)
+
     def value_and_dJ(self, a, b, c, d, params=()):
         """Closed-form values and ``dE/dJ`` of ``m`` Jacobians ``[[a, b], [c, d]]`` (each
         ``(m,)``): ``(values (m,), (dE/da, dE/db, dE/dc, dE/dd), (s1s, s2s, ok))``, by the
-        singular values' chain, as JAX's derivative of :meth:`__call__` without
-        ``invariants`` gives them (a form with invariants takes
+        singular values' chain (a ``symmetric`` form's through ``(Q, S)``, :meth:`of_QS`), as
+        JAX's derivative of :meth:`__call__` without ``invariants`` gives them (a form with invariants takes
         :func:`_invariant_face_terms` instead, unless it has parameters; the safe square roots' zero
         gradient at 0 included; 0 where the barrier is infinite); ``(s1s, s2s)`` are the
         singular values ``fn`` was evaluated at and ``ok`` where the value is finite
@@ -266,6 +299,20 @@ class _SingularValueForm:
         Q, iQ = _root(E * E + H * H)
         R, iR = _root(F * F + G * G)
         s1, s2 = Q + R, Q - R
+        if self.symmetric:
+            # through (Q, S = R^2): dE/dR / (2 R) is dE/dS, with no 0 / 0 where R = 0
+            qs = jax.vmap(jax.value_and_grad(self.of_QS, argnums=(0, 1)),
+                          in_axes=(0, 0, None))
+            ok = a * d - b * c > 0 if self.barrier else None
+            Qv, Sv = (Q, F * F + G * G) if ok is None else (jnp.where(ok, Q, 1.0),
+                                                            jnp.where(ok, F * F + G * G, 0.0))
+            y, (fQ, fS) = qs(Qv, Sv, tuple(params))
+            if self.barrier:
+                y, fQ, fS = jnp.where(ok, y, jnp.inf), jnp.where(ok, fQ, 0.0), jnp.where(ok, fS, 0.0)
+            hq, hr = 0.5 * fQ * iQ, fS
+            s1, s2 = ((jnp.where(ok, s1, 1.0), jnp.where(ok, s2, 1.0)) if self.barrier
+                      else (s1, jnp.abs(s2)))
+            return y, (hq * E + hr * F, hr * G - hq * H, hq * H + hr * G, hq * E - hr * F), (s1, s2, ok)
         fn = jax.vmap(jax.value_and_grad(self.fn, argnums=(0, 1)),
                       in_axes=(0, 0) + (None,) * len(params))
         if self.barrier:
@@ -497,11 +544,12 @@ def _mesh_energy(en: Energy, V, F, Q):
 
 
 def _from_sv(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
-             params=None, invariants=None) -> Energy:
+             params=None, invariants=None, symmetric=False) -> Energy:
     """An Energy from a function of the singular values (s1 >= s2 > 0 when unflipped);
     ``fn(s1, s2, params)`` when ``parametric``; ``invariants(s1^2 + s2^2, s1 s2)`` the same
-    function, when it is symmetric (:class:`_SingularValueForm`)."""
-    of_J = _SingularValueForm(fn, barrier, invariants)
+    function, when it is symmetric (:class:`_SingularValueForm`); ``symmetric``: ``fn`` is
+    (:meth:`_SingularValueForm.of_QS`)."""
+    of_J = _SingularValueForm(fn, barrier, invariants, symmetric)
     return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
                   of_sv=fn if barrier else None, parametric=parametric, params=params)
 
@@ -557,7 +605,9 @@ ENERGIES: dict[str, Energy] = {
     # Without a barrier the forms see |s2|, so d = s1 |s2| and s1 + |s2| = sqrt(tr + 2 d).
     "arap": _from_sv("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, barrier=False,
                      invariants=lambda tr, d: tr - 2.0 * geo.safe_sqrt(tr + 2.0 * d) + 2.0),
-    "conformal": _from_sv("conformal", lambda s1, s2: 0.5 * (s1 - s2) ** 2, True, barrier=False,
+    # Quadratic in the UVs (0.5 |J|^2 - det J unflipped), so not scale-invariant: 4x at 2x the
+    # map, and 0 at a point, its only free-boundary minimum (NO_FREE_MINIMUM).
+    "conformal": _from_sv("conformal", lambda s1, s2: 0.5 * (s1 - s2) ** 2, barrier=False,
                           invariants=lambda tr, d: 0.5 * tr - d),
     "dirichlet": _from_J("dirichlet", lambda J: 0.5 * jnp.sum(J ** 2), barrier=False),
     # Sander et al. 2001 (survey ref. [27]): the L2 stretch of the inverse map UV -> surface,
@@ -613,6 +663,12 @@ def captures_tracer(en: Energy) -> bool:
 NO_FREE_MINIMUM = {
     "dirichlet": "shrinks the map towards a point (its energy falls to 0 there)",
     "stretch": "grows the map without bound (its energy falls to 0 as the map grows)",
+    # It was marked scale-invariant, so each iterate was rescaled to the start's area: a
+    # constrained optimum, not a stationary point, which Newton never reached (max_iters) and
+    # whose implicit gradient was off by 42x on a sheared grid (session 22's gradient sweep).
+    "conformal": ("shrinks the map towards a point (its energy 0.5 (s1 - s2)^2 grows with the "
+                  "map's area and is 0 there); for a free-boundary conformal map use "
+                  "jp.least_squares_map (LSCM), which pins two vertices"),
 }
 
 
@@ -635,7 +691,8 @@ _NO_PARAMS = object()
 
 
 def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
-           scale_invariant: bool = False, barrier: bool = True) -> Energy:
+           scale_invariant: bool = False, barrier: bool = True,
+           symmetric: bool | None = None) -> Energy:
     """A user energy from ``f(s1, s2)`` (singular values) or ``f(J)`` (the 2x2 Jacobian),
     optionally with parameters: ``f(s1, s2, params)`` or ``f(J, params)``.
 
@@ -650,6 +707,15 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
     kernels, and the parameters may be traced, so ``jax.grad`` of a function of
     ``minimize(mesh, jp.energy(f, p)).uv`` with respect to ``p`` is the implicit
     gradient of the optimum (:mod:`jaxparam.optimize.implicit`).
+
+    ``symmetric`` (for ``f(s1, s2)``): whether ``f(s1, s2) == f(s2, s1)``; ``None`` (the
+    default) tests it on 16 random pairs (with parameters, also that the difference does not
+    change with them to first order: ``s1^2 + a s2^2`` is symmetric at ``a = 1`` only;
+    traced parameters are not tested: ``False``, pass ``True`` where it holds).  A symmetric ``f`` is evaluated in ``(s1 + s2, (s1 - s2)^2)``, so its
+    Hessian is exact at a conformal face (``s1 = s2``), where the singular values themselves
+    are not differentiable: Newton's steps and the implicit gradient of :func:`minimize` need
+    it there (a planar mesh flattened to itself has only conformal faces).  An asymmetric
+    ``f`` (``s1 / s2``) kinks there, as ``condition_2`` does.
 
     Example::
 
@@ -675,9 +741,51 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
         raise MeshError(f"energy: a user energy takes {want}, got a function of {len(args)} "
                         "arguments.")
     _check_scalar(fn, n, params if parametric else None, parametric)
-    make = _from_sv if n == 2 else _from_J
-    return make(name or getattr(fn, "__name__", "user"), fn, scale_invariant, barrier=barrier,
-                parametric=parametric, params=params if parametric else None)
+    label = name or getattr(fn, "__name__", "user")
+    if n == 1:
+        return _from_J(label, fn, scale_invariant, barrier=barrier, parametric=parametric,
+                       params=params if parametric else None)
+    if symmetric is None:
+        symmetric = _looks_symmetric(fn, params) if parametric else _looks_symmetric(fn)
+    elif not isinstance(symmetric, bool):
+        raise MeshError(f"energy: symmetric must be True, False or None (test it), got {symmetric!r}.")
+    return _from_sv(label, fn, scale_invariant, barrier=barrier, parametric=parametric,
+                    params=params if parametric else None, symmetric=symmetric)
+
+
+def _looks_symmetric(fn: Callable, *params) -> bool:
+    """Whether ``fn(s1, s2, *params) == fn(s2, s1, *params)`` (to 1e-12 relative) on 16
+    random pairs in ``[0.3, 3]^2``, and, with parameters, whether the difference's derivative
+    in their float leaves vanishes too (``s1^2 + a s2^2`` is symmetric at ``a = 1`` only);
+    ``False`` when that cannot be evaluated (traced parameters, a function JAX cannot map)."""
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(params)):
+        return False
+    a, b = (jnp.asarray(x) for x in np.random.default_rng(0).uniform(0.3, 3.0, (2, 16)))
+    w = jnp.asarray(np.random.default_rng(1).standard_normal(16))
+
+    def gap(p):             # a random combination of fn(s1, s2) - fn(s2, s1)
+        return jnp.sum(w * (jax.vmap(lambda x, y: fn(x, y, *p))(a, b)
+                            - jax.vmap(lambda x, y: fn(x, y, *p))(b, a)))
+    try:
+        with jax.ensure_compile_time_eval():
+            x, y = (np.asarray(jax.vmap(lambda u, v: fn(u, v, *params))(p, q), np.float64)
+                    for p, q in ((a, b), (b, a)))
+            if x.shape != (16,) or not np.all(np.isfinite(x)) or not np.all(
+                    np.abs(x - y) <= 1e-12 * np.maximum(1.0, np.abs(x))):
+                return False
+            if not params:
+                return True
+            floats = [leaf for leaf in jax.tree_util.tree_leaves(params)
+                      if jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)]
+            if not floats:
+                return True
+            d = jax.grad(lambda p: gap(p), allow_int=True)(params)
+            size = float(np.sum(np.abs(x))) / 16
+            return all(np.all(np.abs(np.asarray(g, np.float64)) <= 1e-10 * max(1.0, size))
+                       for g in jax.tree_util.tree_leaves(d)
+                       if jnp.issubdtype(jnp.result_type(g), jnp.inexact))
+    except Exception:       # noqa: BLE001 - a function JAX cannot map is not ours to judge
+        return False
 
 
 def _check_scalar(fn: Callable, n: int, params, parametric: bool) -> None:

@@ -680,7 +680,7 @@ def test_chart_start_and_checks_compile_nothing_and_match_the_jax_kernels():
     assert 4.0 <= st.sym_dirichlet < 8.0 and st.max_aspect >= 1.0
 
 
-@pytest.mark.parametrize("energy", ["mips", "conformal"])
+@pytest.mark.parametrize("energy", ["mips"])
 def test_scale_invariant_energies_are_refused_before_any_work(energy):
     # Found in QA: jaxparam atlas --energy mips on decimated-knight (1000 faces) reported
     # flips 0 but left 43 faces under 1e-18 texels: nothing stops a free chart's triangle from
@@ -689,7 +689,7 @@ def test_scale_invariant_energies_are_refused_before_any_work(energy):
         jp.atlas(jp.shapes.sphere(1), energy=energy)
 
 
-@pytest.mark.parametrize("energy", ["dirichlet", "stretch"])
+@pytest.mark.parametrize("energy", ["dirichlet", "stretch", "conformal"])
 def test_energies_with_no_free_minimum_are_refused(energy):
     # Found in QA with minimize: a free boundary shrinks a Dirichlet map to a point and grows a
     # stretch map without bound; a chart's map has a free boundary.

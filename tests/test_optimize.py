@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import jaxparam as jp
-from jaxparam.errors import SolverError
+from jaxparam.errors import MeshError, SolverError
 
 
 @pytest.fixture(scope="module")
@@ -52,8 +52,21 @@ def test_newton_steps_on_when_its_solve_misses_the_residual(mesh, start):
 @pytest.mark.parametrize("name", ["mips", "angle", "arap", "conformal", "green_lagrange",
                                   "condition_f_squared"])
 def test_every_named_energy_minimizes(mesh, start, name):
-    res = jp.minimize(mesh, name, init=start, free_boundary=True, max_iters=15, verbose=False)
+    free = name != "conformal"          # it has no free minimum but a point
+    res = jp.minimize(mesh, name, init=start, free_boundary=free, max_iters=15, verbose=False)
     assert res.flips == 0 and res.energy <= res.history[0]
+
+
+def test_conformal_energy_is_not_scale_invariant_and_has_no_free_minimum(mesh, start):
+    """0.5 (s1 - s2)^2 is quadratic in the UVs: it was marked scale-invariant, so a free
+    boundary's iterates were rescaled to the start's area, a constrained optimum that Newton
+    did not reach and whose implicit gradient was 42x off (session 22)."""
+    en = jp.ENERGIES["conformal"]
+    assert not en.scale_invariant
+    assert float(en(mesh, 2 * start)) == pytest.approx(4 * float(en(mesh, start)), rel=1e-12)
+    with pytest.raises(MeshError, match=r"'conformal' with a free boundary shrinks the map "
+                                        r"towards a point.*jp\.least_squares_map"):
+        jp.minimize(mesh, "conformal", free_boundary=True)
 
 
 def test_free_boundary_scale_invariant_is_normalized(mesh, start):

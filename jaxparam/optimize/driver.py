@@ -260,7 +260,7 @@ def minimize(mesh, energy="symmetric_dirichlet", *, init=None, free_boundary: bo
         raise MeshError(
             f"minimize: {en.name!r} with a free boundary {en_mod.NO_FREE_MINIMUM[en.name]}; keep "
             "the boundary fixed (free_boundary=False), or minimize an energy with a free "
-            "minimum: 'symmetric_dirichlet', 'arap', 'conformal' or 'mips'.")
+            "minimum: 'symmetric_dirichlet', 'arap' or 'mips'.")
     solver = solver_from(solver)
     stop = StopRules(max_iters=max_iters, energy_rtol=energy_rtol, grad_rtol=grad_rtol,
                      max_seconds=max_seconds)      # checks them, before any work
