@@ -23,7 +23,7 @@ differences need steps well below ``s1 - s2`` (tests/test_gradients.py).
 
 **Derivatives.** The mesh energy ``energy(mesh, uv)`` of an energy of the Jacobian has a
 hand-written derivative (a ``jax.custom_jvp``, :func:`_mesh_energy`): the closed-form
-``dE/dJ`` of each form (:meth:`_SingularValueForm.value_and_dJ`), chained through the Jacobian
+``dE/dJ`` of each form (:meth:`SingularValueForm.value_and_dJ`), chained through the Jacobian
 and the local frame by hand; for the named symmetric functions of the singular values (all but
 ``condition_2`` and ``condition_2_squared``), written in the invariants ``s1^2 + s2^2`` and
 ``s1 s2``, through the Gram matrix of the 3D edges instead, a shorter chain
@@ -47,7 +47,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import geometry as geo
-from . import tol
+from .energy_forms import (JacobianForm, OfJacobian, SingularValueForm, inf_where_inverted,
+                           safe_root)
 from .errors import MeshError
 from .io import as_mesh
 
@@ -187,8 +188,8 @@ class Energy:
             raise MeshError(f"energy {self.name!r}: uv must have shape ({mesh.n_vertices}, 2), one "
                             f"row per vertex of the mesh, got {np.shape(uv)}.")
         V = jnp.asarray(mesh.vertices, jnp.float64)
-        if (isinstance(self.density, _OfJacobian) and V.ndim == 2 and V.shape[1] == 3
-                and isinstance(self.of_J, (_SingularValueForm, _JacobianForm))):
+        if (isinstance(self.density, OfJacobian) and V.ndim == 2 and V.shape[1] == 3
+                and isinstance(self.of_J, (SingularValueForm, JacobianForm))):
             return _mesh_energy(self, V, mesh.faces, jnp.asarray(uv, jnp.float64)[mesh.faces])
         frames = geo.local_frames(V, mesh.faces)
         return total(self, frames, geo.face_areas(V, mesh.faces), jnp.asarray(uv)[mesh.faces])
@@ -202,176 +203,10 @@ def total(en: Energy, frames, areas, Q, params=None):
     return jnp.sum(areas * dens) / jnp.sum(areas)
 
 
-#: A symmetric user energy of the singular values is evaluated by its expansion in
-#: ``S = ((s1 - s2) / 2)^2`` where ``S`` is below this times ``((s1 + s2) / 2)^2`` (``s1 - s2``
-#: below 2e-4 of ``s1 + s2``): there the exact formula's second derivative loses about
-#: ``eps (s1 + s2)^2 / (s1 - s2)^2`` (1e-8 at the threshold) and the expansion's two terms
-#: are off by about as much (:meth:`_SingularValueForm.of_QS`).
-SYMMETRIC_TAYLOR = 1e-8
-
-
-def _barrier(det, value):
-    """``value`` where ``det > 0``, ``+inf`` elsewhere, with finite gradients on both sides."""
-    return jnp.where(det > 0, value, jnp.inf)
-
-
-# The three callables below are frozen dataclasses, not closures, so that an Energy built
-# twice from the same user function compares (and hashes) equal field by field.
-
-@dataclass(frozen=True)
-class _OfJacobian:
-    """``density(frame, q) = of_J(J)``, ``J`` the triangle's Jacobian (9)."""
-
-    of_J: Callable
-
-    def __call__(self, frame, q, *params):
-        return self.of_J(geo.jacobian_from_frame(frame, q), *params)
-
-
-@dataclass(frozen=True)
-class _SingularValueForm:
-    """``of_J(J) = fn(s1, s2)``, ``+inf`` where ``det J <= 0`` when ``barrier``
-    (``|s2|`` otherwise).
-
-    ``invariants``, when given, is the same function of ``(s1^2 + s2^2, s1 s2)`` (``s1 |s2|``
-    without a barrier): ``fn(s1, s2) == invariants(s1**2 + s2**2, s1 * s2)``, which only a
-    symmetric ``fn`` has.  The derivative of the mesh energy then takes the Gram chain
-    (:func:`_invariant_face_terms`)."""
-
-    fn: Callable
-    barrier: bool
-    invariants: Callable | None = None
-    symmetric: bool = False
-
-    def __call__(self, J, *params):
-        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
-        if self.symmetric and self.invariants is None:
-            if self.barrier:                # inverted: +inf, with finite gradients
-                J = jnp.where(det > 0, J, jnp.eye(2))
-            E, F = 0.5 * (J[0, 0] + J[1, 1]), 0.5 * (J[0, 0] - J[1, 1])
-            G, H = 0.5 * (J[1, 0] + J[0, 1]), 0.5 * (J[1, 0] - J[0, 1])
-            value = self.of_QS(_root(E * E + H * H)[0], F * F + G * G, params)
-            return _barrier(det, value) if self.barrier else value
-        if self.invariants is not None:
-            # tr and det J are polynomials of J: no singular value's square root, so the
-            # second derivative has no 0 / 0 at a conformal face (s1 = s2), where the
-            # singular values' chain divides df/ds1 - df/ds2 by s1 - s2 and loses every
-            # digit (the implicit gradient's Hessian and mixed derivative need it there).
-            tr = jnp.sum(J * J)
-            if not self.barrier:
-                return self.invariants(tr, jnp.abs(det), *params)
-            return _barrier(det, self.invariants(tr, jnp.where(det > 0, det, 1.0), *params))
-        s1, s2 = geo.singular_values(J)
-        if not self.barrier:
-            return self.fn(s1, jnp.abs(s2), *params)
-        s2_safe = jnp.where(det > 0, s2, 1.0)
-        s1_safe = jnp.where(det > 0, s1, 1.0)
-        return _barrier(det, self.fn(s1_safe, s2_safe, *params))
-
-    def of_QS(self, Q, S, params=()):
-        """A symmetric ``fn`` as a function of ``Q = (s1 + s2) / 2`` and ``S = ((s1 - s2) /
-        2)^2``, smooth in both: ``fn(Q + sqrt S, Q - sqrt S)`` (``|s2|`` without a barrier), and
-        where ``S < SYMMETRIC_TAYLOR * Q^2`` its expansion ``g(0) + g''(0) S / 2`` in ``S``
-        (``g(r) = fn(Q + r, Q - r)``, even: its odd terms vanish), so that no derivative divides
-        by ``s1 - s2`` (0 / 0 at a conformal face: the singular values' chain has no Hessian
-        there).  Scalars (one face)."""
-        small = S < SYMMETRIC_TAYLOR * Q * Q
-        # the branch not taken is evaluated at a harmless place (finite values and derivatives)
-        R = jnp.where(small, 0.5 * Q, _root(jnp.where(small, 1.0, S))[0])
-        s2 = Q - R if self.barrier else jnp.abs(Q - R)
-        exact = self.fn(Q + R, s2, *params)
-        Qs = jnp.where(small, Q, 1.0)
-        g = lambda r: self.fn(Qs + r, Qs - r, *params)
-        taylor = g(0.0) + 0.5 * jax.grad(jax.grad(g))(0.0) * S
-        return jnp.where(small, taylor, exact)
-
-    def value_and_dJ(self, a, b, c, d, params=()):
-        """Closed-form values and ``dE/dJ`` of ``m`` Jacobians ``[[a, b], [c, d]]`` (each
-        ``(m,)``): ``(values (m,), (dE/da, dE/db, dE/dc, dE/dd), (s1s, s2s, ok))``, by the
-        singular values' chain (a ``symmetric`` form's through ``(Q, S)``, :meth:`of_QS`), as
-        JAX's derivative of :meth:`__call__` without ``invariants`` gives them (a form with invariants takes
-        :func:`_invariant_face_terms` instead, unless it has parameters; the safe square roots' zero
-        gradient at 0 included; 0 where the barrier is infinite); ``(s1s, s2s)`` are the
-        singular values ``fn`` was evaluated at and ``ok`` where the value is finite
-        (``None`` without a barrier), for the parameters' derivative."""
-        E, F = 0.5 * (a + d), 0.5 * (a - d)
-        G, H = 0.5 * (c + b), 0.5 * (c - b)
-        Q, iQ = _root(E * E + H * H)
-        R, iR = _root(F * F + G * G)
-        s1, s2 = Q + R, Q - R
-        if self.symmetric:
-            # through (Q, S = R^2): dE/dR / (2 R) is dE/dS, with no 0 / 0 where R = 0
-            qs = jax.vmap(jax.value_and_grad(self.of_QS, argnums=(0, 1)),
-                          in_axes=(0, 0, None))
-            ok = a * d - b * c > 0 if self.barrier else None
-            Qv, Sv = (Q, F * F + G * G) if ok is None else (jnp.where(ok, Q, 1.0),
-                                                            jnp.where(ok, F * F + G * G, 0.0))
-            y, (fQ, fS) = qs(Qv, Sv, tuple(params))
-            if self.barrier:
-                y, fQ, fS = jnp.where(ok, y, jnp.inf), jnp.where(ok, fQ, 0.0), jnp.where(ok, fS, 0.0)
-            hq, hr = 0.5 * fQ * iQ, fS
-            s1, s2 = ((jnp.where(ok, s1, 1.0), jnp.where(ok, s2, 1.0)) if self.barrier
-                      else (s1, jnp.abs(s2)))
-            return y, (hq * E + hr * F, hr * G - hq * H, hq * H + hr * G, hq * E - hr * F), (s1, s2, ok)
-        fn = jax.vmap(jax.value_and_grad(self.fn, argnums=(0, 1)),
-                      in_axes=(0, 0) + (None,) * len(params))
-        if self.barrier:
-            ok = a * d - b * c > 0
-            s1, s2 = jnp.where(ok, s1, 1.0), jnp.where(ok, s2, 1.0)
-            y, (f1, f2) = fn(s1, s2, *params)
-            y, f1, f2 = jnp.where(ok, y, jnp.inf), jnp.where(ok, f1, 0.0), jnp.where(ok, f2, 0.0)
-        else:
-            ok = None
-            y, (f1, f2) = fn(s1, jnp.abs(s2), *params)
-            f2 = f2 * jnp.sign(s2)
-            s2 = jnp.abs(s2)
-        # s1 = Q + R, s2 = Q - R;  dQ = (E, -H, H, E) / (2 Q),  dR = (F, G, G, -F) / (2 R)
-        hq, hr = 0.5 * (f1 + f2) * iQ, 0.5 * (f1 - f2) * iR
-        return y, (hq * E + hr * F, hr * G - hq * H, hq * H + hr * G, hq * E - hr * F), (s1, s2, ok)
-
-
-@dataclass(frozen=True)
-class _JacobianForm:
-    """``of_J(J) = fn(J)``, ``+inf`` where ``det J <= 0`` when ``barrier``."""
-
-    fn: Callable
-    barrier: bool
-
-    def __call__(self, J, *params):
-        if not self.barrier:
-            return self.fn(J, *params)
-        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
-        J_safe = jnp.where(det > 0, J, jnp.eye(2))
-        return _barrier(det, self.fn(J_safe, *params))
-
-    def value_and_dJ(self, a, b, c, d, params=()):
-        """Values and ``dE/dJ`` of ``m`` Jacobians ``[[a, b], [c, d]]`` (each ``(m,)``), as
-        :meth:`_SingularValueForm.value_and_dJ` (``fn``'s own gradient by JAX, the barrier's
-        mask by hand); the third item is ``(J_safe (m, 2, 2), ok)``."""
-        J = jnp.stack([jnp.stack([a, b], -1), jnp.stack([c, d], -1)], -2)
-        fn = jax.vmap(jax.value_and_grad(self.fn), in_axes=(0,) + (None,) * len(params))
-        ok = None
-        if self.barrier:
-            ok = a * d - b * c > 0
-            J = jnp.where(ok[:, None, None], J, jnp.eye(2))
-        y, g = fn(J, *params)
-        if self.barrier:
-            y, g = jnp.where(ok, y, jnp.inf), jnp.where(ok[:, None, None], g, 0.0)
-        return y, (g[:, 0, 0], g[:, 0, 1], g[:, 1, 0], g[:, 1, 1]), (J, ok)
-
-
-def _root(x):
-    """``(sqrt(x), 1 / sqrt(x))``, both 0 at or below the safe square root's floor (the value
-    and the derivative :func:`jaxparam.geometry.safe_sqrt` has there)."""
-    pos = x > tol.SAFE_SQRT_FLOOR
-    r = jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
-    return r, jnp.where(pos, 1.0 / jnp.where(pos, r, 1.0), 0.0)
-
-
 def _params_jvp(form, aux, params, dparams):
     """``(m,)`` derivative of ``m`` densities along the parameters' tangent ``dparams``, at
-    the arguments :meth:`_SingularValueForm.value_and_dJ` evaluated them at (``aux``)."""
-    x, ok = (aux[:2], aux[2]) if isinstance(form, _SingularValueForm) else (aux[:1], aux[1])
+    the arguments :meth:`SingularValueForm.value_and_dJ` evaluated them at (``aux``)."""
+    x, ok = (aux[:2], aux[2]) if isinstance(form, SingularValueForm) else (aux[:1], aux[1])
     fn = jax.vmap(form.fn, in_axes=(0,) * len(x) + (None,) * len(params))
     _, t = jax.jvp(lambda *p: fn(*x, *p), tuple(params), tuple(dparams))
     return t if ok is None else jnp.where(ok, t, 0.0)
@@ -381,7 +216,7 @@ def _face_terms(form, V, F, Q, params):
     """Per face, by hand: the area ``a``, the density ``f`` and their gradients in the
     corners, for :func:`_mesh_energy`.
 
-    **Arguments:** ``form`` a :class:`_SingularValueForm` or :class:`_JacobianForm`,
+    **Arguments:** ``form`` a :class:`SingularValueForm` or :class:`JacobianForm`,
     ``V (n, 3)``, ``F (m, 3)``, ``Q (m, 3, 2)`` the corners' UVs, ``params`` a tuple of 0 or
     1 parameter pytrees.  **Returns:** ``(a, f, e1, e2, gQ, aux)``: ``a, f (m,)``;
     ``e1, e2`` the edges ``p1 - p0, p2 - p0 (m, 3)``; ``gQ (m, 3, 2)`` = ``df / dQ``; and
@@ -398,10 +233,10 @@ def _face_terms(form, V, F, Q, params):
     ``(l1, x2, y2)``, and the frame's derivatives in ``(e1, e2)``.  A form with invariants
     takes a shorter chain (:func:`_invariant_face_terms`).
     """
-    if isinstance(form, _SingularValueForm) and form.invariants is not None and not params:
+    if isinstance(form, SingularValueForm) and form.invariants is not None and not params:
         return _invariant_face_terms(form, V, F, Q)
     e1, e2, (g11, g12, g22), (nn, inn) = _edge_gram(V, F)
-    l1, il1 = _root(g11)
+    l1, il1 = safe_root(g11)
     x2, y2 = g12 * il1, nn * il1
     u1, u2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
     idet = 1.0 / (l1 * y2)
@@ -430,7 +265,7 @@ def _edge_gram(V, F):
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
     cr = jnp.cross(e1, e2)
     return (e1, e2, (geo.dot(e1, e1), geo.dot(e1, e2), geo.dot(e2, e2)),
-            _root(geo.dot(cr, cr)))
+            safe_root(geo.dot(cr, cr)))
 
 
 def _invariant_face_terms(form, V, F, Q):
@@ -547,18 +382,18 @@ def _from_sv(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
              params=None, invariants=None, symmetric=False) -> Energy:
     """An Energy from a function of the singular values (s1 >= s2 > 0 when unflipped);
     ``fn(s1, s2, params)`` when ``parametric``; ``invariants(s1^2 + s2^2, s1 s2)`` the same
-    function, when it is symmetric (:class:`_SingularValueForm`); ``symmetric``: ``fn`` is
-    (:meth:`_SingularValueForm.of_QS`)."""
-    of_J = _SingularValueForm(fn, barrier, invariants, symmetric)
-    return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
+    function, when it is symmetric (:class:`SingularValueForm`); ``symmetric``: ``fn`` is
+    (:meth:`SingularValueForm.of_QS`)."""
+    of_J = SingularValueForm(fn, barrier, invariants, symmetric)
+    return Energy(name, OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
                   of_sv=fn if barrier else None, parametric=parametric, params=params)
 
 
 def _from_J(name, fn, scale_invariant=False, *, barrier=True, parametric=False,
             params=None) -> Energy:
     """An Energy from a function of the 2x2 Jacobian; ``fn(J, params)`` when ``parametric``."""
-    of_J = _JacobianForm(fn, barrier)
-    return Energy(name, _OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
+    of_J = JacobianForm(fn, barrier)
+    return Energy(name, OfJacobian(of_J), scale_invariant, barrier, of_J=of_J,
                   parametric=parametric, params=params)
 
 
@@ -570,7 +405,7 @@ def _angle_density(frame, q):
     alpha = geo.corner_angles(frame, jnp.array([[0, 1, 2]]))[0]
     theta = geo.corner_angles(q, jnp.array([[0, 1, 2]]))[0]
     det = geo.signed_areas(q, jnp.array([[0, 1, 2]]))[0]
-    return _barrier(det, jnp.sum((jnp.where(det > 0, theta, alpha) - alpha) ** 2))
+    return inf_where_inverted(det, jnp.sum((jnp.where(det > 0, theta, alpha) - alpha) ** 2))
 
 
 def mips_prop2(frame, q):
@@ -631,7 +466,7 @@ def _captured(fn, depth: int = 0):
     if depth > 4 or fn is None:
         return []
     out = []
-    for attr in ("of_J", "fn", "func"):             # _OfJacobian, the forms, partial
+    for attr in ("of_J", "fn", "func"):             # OfJacobian, the forms, partial
         inner = getattr(fn, attr, None)
         if callable(inner) and inner is not fn:
             out += _captured(inner, depth + 1)
@@ -808,7 +643,7 @@ def _check_scalar(fn: Callable, n: int, params, parametric: bool) -> None:
                         f"triangle), got {got}; reduce it, e.g. with jnp.sum.")
 
 
-_STRETCH_OF_J = _SingularValueForm(lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2), True)
+_STRETCH_OF_J = SingularValueForm(lambda s1, s2: 0.5 * (s1 ** -2 + s2 ** -2), True)
 
 
 def _density_stretch(frame, q, params):

@@ -8,6 +8,7 @@ from hypothesis import given, settings, strategies as st
 
 import jaxparam as jp
 from jaxparam import energies as E
+from jaxparam import energy_forms as EF
 from jaxparam import geometry as G
 
 DEFORMATION = ["condition_2", "mips", "condition_2_squared", "condition_f_squared", "angle"]
@@ -197,7 +198,7 @@ def test_closed_form_dE_dJ_matches_autodiff_on_degenerate_jacobians(name):
     # value_and_dJ is the singular values' chain (the path of forms without invariants);
     # a form with invariants is evaluated through them (tested below)
     chain = (dataclasses.replace(form, invariants=None)
-             if isinstance(form, E._SingularValueForm) else form)
+             if isinstance(form, EF.SingularValueForm) else form)
     y0, g0 = jax.vmap(jax.value_and_grad(chain))(J)
     _close(y, y0, 1e-13)
     for got, want in zip(g, (g0[:, 0, 0], g0[:, 0, 1], g0[:, 1, 0], g0[:, 1, 1])):
@@ -210,7 +211,7 @@ def test_closed_form_dE_dJ_matches_autodiff_on_degenerate_jacobians(name):
 
 
 @pytest.mark.parametrize("name", [n for n, e in E.ENERGIES.items()
-                                  if isinstance(e.of_J, E._SingularValueForm)])
+                                  if isinstance(e.of_J, EF.SingularValueForm)])
 def test_invariant_forms_equal_the_singular_value_forms(name):
     """A named energy's ``invariants(s1^2 + s2^2, s1 s2)`` (which its mesh derivative uses,
     energies._invariant_face_terms) is its ``fn(s1, s2)``, on both orders of the singular
@@ -343,7 +344,7 @@ def test_a_user_energy_that_is_not_a_density_is_refused_when_made():
 
 
 @pytest.mark.parametrize("name", [n for n, e in E.ENERGIES.items()
-                                  if isinstance(e.of_J, E._SingularValueForm)
+                                  if isinstance(e.of_J, EF.SingularValueForm)
                                   and e.of_J.invariants is not None])
 def test_symmetric_energy_hessian_is_exact_at_a_conformal_face(name):
     """A symmetric energy of the singular values is evaluated through ``(tr J^T J, det J)``,
