@@ -47,8 +47,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import geometry as geo
-from .energy_forms import (JacobianForm, OfJacobian, SingularValueForm, inf_where_inverted,
-                           safe_root)
+from .energy_forms import (SCALE, SWAP, JacobianForm, OfJacobian, SingularValueForm,
+                           inf_where_inverted, looks_invariant, safe_root)
 from .errors import MeshError
 from .io import as_mesh
 
@@ -526,7 +526,7 @@ _NO_PARAMS = object()
 
 
 def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
-           scale_invariant: bool = False, barrier: bool = True,
+           scale_invariant: bool | None = None, barrier: bool = True,
            symmetric: bool | None = None) -> Energy:
     """A user energy from ``f(s1, s2)`` (singular values) or ``f(J)`` (the 2x2 Jacobian),
     optionally with parameters: ``f(s1, s2, params)`` or ``f(J, params)``.
@@ -543,10 +543,14 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
     ``minimize(mesh, jp.energy(f, p)).uv`` with respect to ``p`` is the implicit
     gradient of the optimum (:mod:`jaxparam.optimize.implicit`).
 
-    ``symmetric`` (for ``f(s1, s2)``): whether ``f(s1, s2) == f(s2, s1)``; ``None`` (the
-    default) tests it on 16 random pairs (with parameters, also that the difference does not
-    change with them to first order: ``s1^2 + a s2^2`` is symmetric at ``a = 1`` only;
-    traced parameters are not tested: ``False``, pass ``True`` where it holds).  A symmetric ``f`` is evaluated in ``(s1 + s2, (s1 - s2)^2)``, so its
+    ``scale_invariant``: whether ``f`` is unchanged when the map is scaled (MIPS, the
+    condition numbers); ``symmetric`` (for ``f(s1, s2)``): whether ``f(s1, s2) == f(s2, s1)``.
+    ``None`` (the default) tests each on 16 random arguments (with parameters, also that the
+    difference does not change with them to first order: ``s1^2 + a s2^2`` is symmetric at
+    ``a = 1`` only; traced parameters are not tested: ``False``, pass ``True`` where it
+    holds).  A scale-invariant energy's free-boundary result is rescaled to the start's
+    area and centroid (it has a minimum at every scale), and its implicit gradient leaves
+    the scaling out.  A symmetric ``f`` is evaluated in ``(s1 + s2, (s1 - s2)^2)``, so its
     Hessian is exact at a conformal face (``s1 = s2``), where the singular values themselves
     are not differentiable: Newton's steps and the implicit gradient of :func:`minimize` need
     it there (a planar mesh flattened to itself has only conformal faces).  An asymmetric
@@ -577,50 +581,19 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
                         "arguments.")
     _check_scalar(fn, n, params if parametric else None, parametric)
     label = name or getattr(fn, "__name__", "user")
+    extra = (params,) if parametric else ()
+    for flag, value in (("scale_invariant", scale_invariant), ("symmetric", symmetric)):
+        if value is not None and not isinstance(value, bool):
+            raise MeshError(f"energy: {flag} must be True, False or None (test it), got {value!r}.")
+    if scale_invariant is None:
+        scale_invariant = looks_invariant(fn, n, SCALE, *extra)
     if n == 1:
         return _from_J(label, fn, scale_invariant, barrier=barrier, parametric=parametric,
                        params=params if parametric else None)
     if symmetric is None:
-        symmetric = _looks_symmetric(fn, params) if parametric else _looks_symmetric(fn)
-    elif not isinstance(symmetric, bool):
-        raise MeshError(f"energy: symmetric must be True, False or None (test it), got {symmetric!r}.")
+        symmetric = looks_invariant(fn, 2, SWAP, *extra)
     return _from_sv(label, fn, scale_invariant, barrier=barrier, parametric=parametric,
                     params=params if parametric else None, symmetric=symmetric)
-
-
-def _looks_symmetric(fn: Callable, *params) -> bool:
-    """Whether ``fn(s1, s2, *params) == fn(s2, s1, *params)`` (to 1e-12 relative) on 16
-    random pairs in ``[0.3, 3]^2``, and, with parameters, whether the difference's derivative
-    in their float leaves vanishes too (``s1^2 + a s2^2`` is symmetric at ``a = 1`` only);
-    ``False`` when that cannot be evaluated (traced parameters, a function JAX cannot map)."""
-    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(params)):
-        return False
-    a, b = (jnp.asarray(x) for x in np.random.default_rng(0).uniform(0.3, 3.0, (2, 16)))
-    w = jnp.asarray(np.random.default_rng(1).standard_normal(16))
-
-    def gap(p):             # a random combination of fn(s1, s2) - fn(s2, s1)
-        return jnp.sum(w * (jax.vmap(lambda x, y: fn(x, y, *p))(a, b)
-                            - jax.vmap(lambda x, y: fn(x, y, *p))(b, a)))
-    try:
-        with jax.ensure_compile_time_eval():
-            x, y = (np.asarray(jax.vmap(lambda u, v: fn(u, v, *params))(p, q), np.float64)
-                    for p, q in ((a, b), (b, a)))
-            if x.shape != (16,) or not np.all(np.isfinite(x)) or not np.all(
-                    np.abs(x - y) <= 1e-12 * np.maximum(1.0, np.abs(x))):
-                return False
-            if not params:
-                return True
-            floats = [leaf for leaf in jax.tree_util.tree_leaves(params)
-                      if jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)]
-            if not floats:
-                return True
-            d = jax.grad(lambda p: gap(p), allow_int=True)(params)
-            size = float(np.sum(np.abs(x))) / 16
-            return all(np.all(np.abs(np.asarray(g, np.float64)) <= 1e-10 * max(1.0, size))
-                       for g in jax.tree_util.tree_leaves(d)
-                       if jnp.issubdtype(jnp.result_type(g), jnp.inexact))
-    except Exception:       # noqa: BLE001 - a function JAX cannot map is not ours to judge
-        return False
 
 
 def _check_scalar(fn: Callable, n: int, params, parametric: bool) -> None:

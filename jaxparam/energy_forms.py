@@ -13,12 +13,13 @@ from typing import Callable
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import geometry as geo
 from . import tol
 
 __all__ = ["OfJacobian", "SingularValueForm", "JacobianForm", "safe_root", "inf_where_inverted",
-           "SYMMETRIC_TAYLOR"]
+           "SYMMETRIC_TAYLOR", "samples", "looks_invariant", "SWAP", "SCALE"]
 
 
 #: A symmetric user energy of the singular values is evaluated by its expansion in
@@ -182,3 +183,57 @@ def safe_root(x):
     pos = x > tol.SAFE_SQRT_FLOOR
     r = jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
     return r, jnp.where(pos, 1.0 / jnp.where(pos, r, 1.0), 0.0)
+
+
+def samples(n: int) -> tuple:
+    """16 random arguments of a density: pairs ``(s1, s2)`` in ``[0.3, 3]^2`` (``n = 2``), or
+    Jacobians ``U diag(s1, s2) V^T`` with those singular values and ``det > 0`` (``n = 1``)."""
+    rng = np.random.default_rng(0)
+    s = rng.uniform(0.3, 3.0, (2, 16))
+    if n == 2:
+        return tuple(jnp.asarray(x) for x in s)
+    t, u = rng.uniform(0.0, 2 * np.pi, (2, 16))
+    rot = lambda a: np.stack([np.stack([np.cos(a), -np.sin(a)], -1),
+                              np.stack([np.sin(a), np.cos(a)], -1)], -2)
+    return (jnp.asarray(rot(t) @ (s.T[:, :, None] * np.eye(2)) @ rot(u).transpose(0, 2, 1)),)
+
+
+def looks_invariant(fn: Callable, n: int, moves, *params) -> bool:
+    """Whether ``fn(*x, *params) == fn(*move(*x), *params)`` (to 1e-12 relative) for every
+    ``move`` of ``moves`` on :func:`samples`' 16 arguments, and, with parameters, whether the
+    differences' derivatives in their float leaves vanish too (``s1^2 + a s2^2`` is symmetric
+    at ``a = 1`` only); ``False`` when that cannot be evaluated (traced parameters, a function
+    JAX cannot map)."""
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(params)):
+        return False
+    xs = samples(n)
+    w = jnp.asarray(np.random.default_rng(1).standard_normal(16))
+    at = lambda args, p: jax.vmap(lambda *a: fn(*a, *p))(*args)
+    try:
+        with jax.ensure_compile_time_eval():
+            x = np.asarray(at(xs, params), np.float64)
+            if x.shape != (16,) or not np.all(np.isfinite(x)):
+                return False
+            size = max(1.0, float(np.mean(np.abs(x))))
+            for move in moves:
+                y = np.asarray(at(move(*xs), params), np.float64)
+                if not np.all(np.abs(x - y) <= 1e-12 * np.maximum(1.0, np.abs(x))):
+                    return False
+                if not any(jnp.issubdtype(jnp.result_type(leaf), jnp.inexact)
+                           for leaf in jax.tree_util.tree_leaves(params)):
+                    continue
+                gap = lambda p: jnp.sum(w * (at(xs, p) - at(move(*xs), p)))
+                d = jax.grad(gap, allow_int=True)(params)
+                if not all(np.all(np.abs(np.asarray(g, np.float64)) <= 1e-10 * size)
+                           for g in jax.tree_util.tree_leaves(d)
+                           if jnp.issubdtype(jnp.result_type(g), jnp.inexact)):
+                    return False
+            return True
+    except Exception:       # noqa: BLE001 - a function JAX cannot map is not ours to judge
+        return False
+
+
+#: The moves a user energy is tested against (:func:`jaxparam.energies.energy`): the singular
+#: values swapped (symmetric), and the map scaled up and down (scale-invariant).
+SWAP = (lambda a, b: (b, a),)
+SCALE = (lambda *x: tuple(2.0 * v for v in x), lambda *x: tuple(0.37 * v for v in x))

@@ -134,7 +134,7 @@ def test_energy_equality_is_by_value():
     assert a == b and hash(a) == hash(b) and a is not b
     assert a.of_J is not None and a.of_sv is f
     assert jp.energy(f, name="other") != a
-    assert jp.energy(f, scale_invariant=True) != a
+    assert a.scale_invariant and jp.energy(f, scale_invariant=False) != a     # found by test
     assert jp.energy(lambda s1, s2: s1 / s2 + s2 / s1) != a     # another function object
     assert E.get(f) == a and E.get("mips") is E.ENERGIES["mips"]
     J = jp.energy(lambda J: jnp.sum(J ** 2))
@@ -383,6 +383,21 @@ def test_user_energies_of_the_singular_values_are_found_symmetric_or_not():
     assert not jp.energy(lambda s1, s2: s1 / s2 + s2 / s1, symmetric=False).of_J.symmetric
     with pytest.raises(jp.MeshError, match="symmetric must be True, False or None"):
         jp.energy(lambda s1, s2: s1 + s2, symmetric="yes")
+
+
+def test_user_energies_are_found_scale_invariant_or_not():
+    """``scale_invariant=None`` tests ``f`` at 2x and 0.37x the map (session 22: a hand-written
+    MIPS without the flag kept the scaling in the implicit gradient's Hessian: singular)."""
+    inv = lambda f, *p: jp.energy(f, *p).scale_invariant
+    assert inv(lambda s1, s2: s1 / s2 + s2 / s1)
+    assert not inv(lambda s1, s2: s1 ** 2 + s2 ** -2)
+    assert inv(lambda J: jnp.sum(J * J) / jnp.linalg.det(J))
+    assert not inv(lambda J: jnp.sum(J * J))
+    assert inv(lambda s1, s2, a: (s1 / s2) ** a, 1.5)
+    assert not inv(lambda s1, s2, a: s1 ** a / s2, 1.0)     # invariant at a = 1 only
+    assert not jp.energy(lambda s1, s2: s1 / s2, scale_invariant=False).scale_invariant
+    with pytest.raises(jp.MeshError, match="scale_invariant must be True, False or None"):
+        jp.energy(lambda s1, s2: s1 / s2, scale_invariant=1)
 
 
 @pytest.mark.parametrize("named, user", [

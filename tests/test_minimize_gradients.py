@@ -346,3 +346,24 @@ def test_forward_mode_is_refused_with_the_reverse_mode_remedy(transform):
            "jacfwd": lambda: jax.jacfwd(f)(V)}[transform]
     with pytest.raises(SolverError, match=r"forward-mode.*jax\.jacrev"):
         run()
+
+
+def test_a_singular_backward_system_is_a_solver_error_that_names_the_remedy(setup):
+    """A hand-written MIPS told it is not scale-invariant keeps the scaling in the Hessian's
+    null space: the backward solve fails.  Eagerly that failure was a JaxRuntimeError wrapping
+    the SolverError of the callback; now it is the SolverError itself, naming
+    ``scale_invariant=True`` (which ``jp.energy`` finds by default: then the gradient works)."""
+    mesh, _, _ = setup
+    F = mesh.faces
+    f = lambda s1, s2: s1 / s2 + s2 / s1
+
+    def loss(V, **kw):
+        en = jp.energy(f, **kw)
+        return jnp.sum(jp.minimize(jp.TriMesh(V, F), en, free_boundary=True, **TIGHT).uv[:3] ** 2)
+
+    V = jnp.asarray(mesh.vertices)
+    with pytest.raises(SolverError, match=r"implicit gradient's linear system .*scale_invariant=True") as info:
+        jax.grad(lambda V: loss(V, scale_invariant=False))(V)
+    assert info.value.stage == "gradient"
+    assert jp.energy(f).scale_invariant
+    assert np.all(np.isfinite(np.asarray(jax.grad(loss)(V))))

@@ -273,12 +273,23 @@ def minimize_traced(mesh, en, base, free_boundary: bool, solver: Solver, stop: S
                   jax.ShapeDtypeStruct((), jnp.int64), jax.ShapeDtypeStruct((), jnp.bool_),
                   jax.ShapeDtypeStruct((), jnp.int64))
 
-    def lambda_host(Vh, bh, x, g, converged, check, *lh):
+    def lambda_host(Vh, bh, x, g, converged, check, *lh, inside=True):
         if bool(check) and not bool(converged):
             unconverged_gradient(strict)
         prob = problem_of(Vh, bh, lh, take=True)
-        with host_callback():
-            return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
+        try:
+            if not inside:
+                return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
+            with host_callback():
+                return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
+        except SolverError as exc:
+            raise SolverError(
+                f"minimize: the implicit gradient's linear system (the Hessian at the optimum) "
+                f"is singular beyond the motions the energy is known to ignore ({exc}). A free "
+                "boundary with an energy unchanged when the map is scaled needs "
+                "jp.energy(..., scale_invariant=True) (the default tests it); else the optimum "
+                "is not isolated (a flat direction of the energy) and has no derivative there.",
+                stage="gradient") from None
 
     def solve(store, Vv, bb, fl, il):
         return jax.pure_callback(functools.partial(solve_host, store), out_shapes, Vv, bb,
@@ -304,9 +315,16 @@ def minimize_traced(mesh, en, base, free_boundary: bool, solver: Solver, stop: S
                     r = runs.first.result
                     detail = f"stopped by {r.reason!r} after {r.iterations} iterations"
                 unconverged_gradient(strict, detail)
-        lam = jax.pure_callback(lambda_host, jax.ShapeDtypeStruct((k2,), jnp.float64), Vv, bb,
-                                x, g, converged, jnp.asarray(check), *_merge(fl, il, is_float),
-                                vmap_method="sequential")
+        merged = _merge(fl, il, is_float)
+        if not is_traced((Vv, bb, x, g, merged)):
+            # eager: solved right here, so a SolverError reaches the caller as itself, not
+            # wrapped in the JaxRuntimeError of a failed callback
+            lam = jnp.asarray(lambda_host(*(np.asarray(a) for a in (Vv, bb, x, g)), converged,
+                                          False, *(np.asarray(a) for a in merged), inside=False))
+        else:
+            lam = jax.pure_callback(lambda_host, jax.ShapeDtypeStruct((k2,), jnp.float64), Vv, bb,
+                                    x, g, converged, jnp.asarray(check), *merged,
+                                    vmap_method="sequential")
         dV, db, dfl = cotangents(Vv, bb, fl, il, x, lam, free, F, en=static, treedef=treedef,
                                  is_float=tuple(is_float))
         dil = tuple(np.zeros(np.shape(a), jax.dtypes.float0) for a in il)
