@@ -680,6 +680,22 @@ def test_chart_start_and_checks_compile_nothing_and_match_the_jax_kernels():
     assert 4.0 <= st.sym_dirichlet < 8.0 and st.max_aspect >= 1.0
 
 
+def test_compaction_whose_charts_do_not_fit_keeps_the_layout_that_does():
+    """Found by session 22's held-out sweep: a 64 x 12 torus at 42 texels with 8-texel margins
+    packs its 8 charts, but the compaction's 12 pieces do not fit, and that SolverError failed
+    the atlas (advising 48 texels); the 8-chart layout is kept now."""
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 64, endpoint=False),
+                       np.linspace(0, 2 * np.pi, 12, endpoint=False), indexing="ij")
+    V = np.stack([(1 + 0.3 * np.cos(v)) * np.cos(u), (1 + 0.3 * np.cos(v)) * np.sin(u),
+                  0.3 * np.sin(v)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(64), np.arange(12), indexing="ij")
+    a, b = i * 12 + j, (i + 1) % 64 * 12 + j
+    c, d = (i + 1) % 64 * 12 + (j + 1) % 12, i * 12 + (j + 1) % 12
+    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    at = atlas(jp.TriMesh(V, F), texture_size=42, margin_texels=8, verbose=False)
+    assert at.stats.charts == 8 and at.stats.flips == 0 and at.stats.overlaps == 0
+
+
 @pytest.mark.parametrize("energy", ["mips"])
 def test_scale_invariant_energies_are_refused_before_any_work(energy):
     # Found in QA: jaxparam atlas --energy mips on decimated-knight (1000 faces) reported

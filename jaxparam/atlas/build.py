@@ -282,8 +282,12 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                                                     max_iters, max_new=int(compact * k),
                                                     accept=float(compact_accept))
             if made:
-                laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size), int(margin_texels))
-                if laid2[-1] > laid[-1]:          # the cuts pack tighter: keep them
+                try:
+                    laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size),
+                                    int(margin_texels))
+                except SolverError:               # the cuts' charts do not fit: keep the
+                    laid2 = None                  # layout that does (a held-out torus: 8
+                if laid2 is not None and laid2[-1] > laid[-1]:   # charts fit, 12 did not)
                     chart, laid = chart2, laid2
             mark("compact")
     finally:

@@ -577,7 +577,7 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     # the area's scale, start from it: area3d s^2 + m P s + k m^2 = fill inner^2, P the
     # charts' rectangles' half-perimeters (3D units).
     if k * (1 + m) ** 2 > inner * inner:
-        raise SolverError(f"pack_charts: {k} charts, each at least one cell of {f} texels with a "
+        raise SolverError(f"pack_charts: {k} charts, each at least one cell of {f} texel{'s' if f > 1 else ''} with a "
                           f"margin of {margin_texels} texels, need more than the {texture_size}-texel "
                           f"square holds; lower margin_texels or raise texture_size (to at least "
                           f"{int(np.ceil(np.sqrt(k) * (1 + m) * f + 2 * m * f))}).", stage="pack")
