@@ -126,3 +126,16 @@ def test_face_grid_finds_the_farthest_point_that_samples_miss():
     assert sampled.hausdorff_ba < 0.95 * exact
     assert grid.hausdorff_ba == pytest.approx(exact, rel=1e-12)
     assert face_grid_points(square, F_sq, 8).shape == (2 * (45 - 3), 3)
+
+
+def test_unused_vertices_are_not_surface_samples():
+    """Found by session 22's held-out sweep: a disk written with unused vertices far off it (a
+    sphere's cap cut away) had every remesh level's error measured from those vertices."""
+    m = jp.shapes.graph_surface(6)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    far = np.vstack([V, [[0.0, 0.0, 5.0], [3.0, 3.0, 3.0]]])      # two vertices no face uses
+    W = V + [0.0, 0.0, 0.01]
+    clean = surface_distance(V, F, W, F, samples=2000)
+    with_unused = surface_distance(far, F, np.vstack([W, far[-2:]]), F, samples=2000)
+    assert with_unused.hausdorff == pytest.approx(clean.hausdorff, rel=1e-12)
+    assert with_unused.rms_ab == pytest.approx(clean.rms_ab, rel=1e-12)
