@@ -22,7 +22,7 @@ from . import tol
 from . import topology as topo
 from .errors import DegenerateFaceError, MeshError, first_few
 
-__all__ = ["TriMesh", "grid_faces", "concrete_values"]
+__all__ = ["TriMesh", "grid_faces", "concrete_values", "zero_area_faces", "refuse_zero_area"]
 
 
 def _is_concrete(x) -> bool:
@@ -146,11 +146,7 @@ class TriMesh:
             raise MeshError(f"TriMesh: vertices {first_few(bad)} have non-finite coordinates "
                             f"(vertex {int(bad[0])} is {tuple(float(x) for x in V[bad[0]])}); "
                             "remove or repair them before parameterizing.")
-        e1 = V[F[:, 1]] - V[F[:, 0]]
-        e2 = V[F[:, 2]] - V[F[:, 0]]
-        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
-        scale = np.mean(np.concatenate([np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)])) ** 2
-        zero = np.flatnonzero(area2 <= tol.DEGENERATE_AREA_REL * max(scale, np.finfo(float).tiny))
+        zero = zero_area_faces(V, F)
         if zero.size:
             used = np.unique(F)
             distinct = np.unique(V[used], axis=0).shape[0]
@@ -166,9 +162,38 @@ class TriMesh:
                         "from the origin collapses. Save it in float64 or near the origin.")
             raise DegenerateFaceError(
                 f"TriMesh: faces {first_few(zero)} have zero area (face {int(zero[0])} = "
-                f"{tuple(int(v) for v in F[zero[0]])}); collapse or remove them "
-                "(e.g. trimesh's remove_degenerate_faces), or pass validate=False to keep them."
+                f"{tuple(int(v) for v in F[zero[0]])}); collapse or remove them (e.g. with "
+                "trimesh: m.update_faces(m.nondegenerate_faces())). TriMesh(..., validate=False) "
+                "keeps them, but a map spends no area on them and a remesh may not follow "
+                "the surface there."
                 + hint)
+
+
+def zero_area_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """The faces of ``F (m, 3)`` over ``V (n, 3)`` whose area is zero relative to the mean edge
+    length squared (:data:`jaxparam.tol.DEGENERATE_AREA_REL`), ascending."""
+    e1 = V[F[:, 1]] - V[F[:, 0]]
+    e2 = V[F[:, 2]] - V[F[:, 0]]
+    area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+    scale = np.mean(np.concatenate([np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)])) ** 2
+    return np.flatnonzero(area2 <= tol.DEGENERATE_AREA_REL * max(scale, np.finfo(float).tiny))
+
+
+def refuse_zero_area(mesh: "TriMesh", where: str) -> None:
+    """Raise :class:`DegenerateFaceError` when ``mesh`` (concrete vertices; one made with
+    ``validate=False``) has faces of zero area: ``where``'s result would be silently wrong (a
+    sphere with one flat face remeshed 27 % of its diagonal off, against 1.5 % without it)."""
+    V = concrete_values(mesh.vertices)
+    if V is None or mesh.n_faces == 0:
+        return
+    zero = zero_area_faces(np.asarray(V, np.float64), np.asarray(mesh.faces))
+    if zero.size:
+        raise DegenerateFaceError(
+            f"{where}: faces {first_few(zero)} have zero area (face {int(zero[0])} = "
+            f"{tuple(int(v) for v in mesh.faces[zero[0]])}; the mesh was made with "
+            "validate=False); a map gives them no room and the result does not follow the "
+            "surface around them: collapse or remove them first (e.g. with trimesh: "
+            "m.update_faces(m.nondegenerate_faces())).")
 
 
 class _StaticIndex:

@@ -49,7 +49,7 @@ from . import geometry
 from .distance import point_triangle_distance, surface_distance
 from .energies import ENERGIES, density_stretch
 from .linear import check_unfolded, convex_map
-from .mesh import TriMesh, concrete_values
+from .mesh import TriMesh, concrete_values, refuse_zero_area
 from .io import as_mesh
 from .optimize import Newton, Problem, StopRules, minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
@@ -620,6 +620,7 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
                         f"{base_faces!r}; pass positions in the boundary loop as corners=.")
     fan = base_faces if corners is None else corners
     disk_check(mesh, "remesh")
+    refuse_zero_area(mesh, "remesh")
     t = mesh.topology
     if len(t.boundary_loops) != 1:
         raise MeshError(f"remesh: the mesh has {len(t.boundary_loops)} boundary loops; remeshing "

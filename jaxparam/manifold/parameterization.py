@@ -13,7 +13,7 @@ from ..options import choose
 from ..errors import MeshError, SolverError
 from ..distance import point_triangle_distance
 from ..host import face_areas
-from ..mesh import TriMesh
+from ..mesh import TriMesh, refuse_zero_area
 from ..io import as_mesh
 from ..remesh import Remesh
 from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
@@ -568,6 +568,7 @@ def manifold_map(mesh: TriMesh, base_faces: int = 100, *, weights: str = "mean_v
                         "charts for positions V with the discrete choices held fixed).")
     method = choose(method, METHODS, what="method", where="manifold_map")
     check_closed_manifold(mesh)
+    refuse_zero_area(mesh, "manifold_map")
     t = mesh.topology
     least = fewest_faces(t.genus)
     if least >= t.n_faces:
