@@ -458,10 +458,12 @@ def level_errors(mesh: TriMesh, uv, levels: int, corners=6) -> np.ndarray:
 
 
 def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | None = None,
-                   weights: str = "shape_preserving", levels: int | None = None, corners=6):
+                   weights: str = "shape_preserving", levels: int | None = None, corners=6,
+                   boundary: str = "circle"):
     """The default parameterization of :func:`remesh`: one that samples by area.
 
-    A convex-combination map (``weights``, the boundary on the unit circle by chord length),
+    A convex-combination map (``weights``, the boundary on the unit circle by chord length, or
+    on ``boundary``, e.g. ``"square"``: the remesh's base fan needs a convex domain),
     then a flip-free minimization (projected Newton, at most ``max_iters`` steps; default
     :func:`area_map_iters`: 25 up to 40k faces, fewer above) of ``energy`` with that boundary
     fixed.  By default Sander et al.'s L2 stretch (survey ref. [27]) weighted by the input's
@@ -494,7 +496,7 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     remesh to sample for (see below; ``None``: no reweighting).
 
     **Returns:** ``uv (n, 2)``, one-to-one (every step is flip-free), boundary on the unit
-    circle; differentiable in ``mesh.vertices`` (the implicit gradient of the minimization of
+    circle (or ``boundary``); differentiable in ``mesh.vertices`` (the implicit gradient of the minimization of
     :func:`~jaxparam.energies.density_stretch` on the whole mesh, when they are traced).
 
     Example::
@@ -503,12 +505,12 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
         semi = jp.remesh(mesh, uv, levels=5)      # the same as jp.remesh(mesh, levels=5)
     """
     default = isinstance(energy, str) and energy == "density_stretch"
-    if (default and max_iters is None and weights == "shape_preserving" and mesh.n_faces >
-            AREA_MAP_FULL_FACES and np.all(mesh.topology.referenced)
+    if (default and max_iters is None and weights == "shape_preserving" and boundary == "circle"
+            and mesh.n_faces > AREA_MAP_FULL_FACES and np.all(mesh.topology.referenced)
             and concrete_values(mesh.vertices) is not None):
         return reweighted_stretch_map(mesh)       # no Newton: one Cholesky per round
     iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
-    start = convex_map(mesh, weights=weights, boundary="circle")
+    start = convex_map(mesh, weights=weights, boundary=boundary)
     if mesh.topology.interior.size == 0:    # every vertex on the circle: nothing to minimize
         return start
     check_unfolded(mesh, start, weights, "area_aware_map")

@@ -482,3 +482,19 @@ def test_compress_of_a_level_0_remesh_says_to_remesh_deeper(mesh_file, tmp_path,
     capsys.readouterr()
     assert main(["-q", "compress", str(semi), "-o", str(tmp_path / "c.obj")]) == 3
     assert "at 1 level or more (a remesh of level 0 is its base domain alone" in capsys.readouterr().err
+
+
+def test_remesh_with_a_square_boundary_takes_the_area_aware_map(tmp_path):
+    """Found by session 22's held-out sweep: ``remesh --boundary square`` took the plain convex
+    map, 21 % of the diagonal off at level 4 on a sphere with one face removed (the circle's
+    area-aware map: 0.6 %); it now minimizes the stretch inside the square too."""
+    s = jp.shapes.sphere(2)
+    src = tmp_path / "cap.obj"
+    jp.save(src, jp.TriMesh(s.vertices, np.delete(np.asarray(s.faces), 0, axis=0)))
+    err = {}
+    for b in ("circle", "square"):
+        rep = tmp_path / f"{b}.json"
+        assert main(["-q", "remesh", str(src), "-o", str(tmp_path / f"{b}.obj"), "--levels", "3",
+                     "--boundary", b, "--report", str(rep)]) == 0
+        err[b] = json.loads(rep.read_text())["errors"]["hausdorff"][-1]
+    assert err["square"] < 2 * err["circle"] + 0.005, err
