@@ -170,3 +170,18 @@ def test_cli_manifold_on_a_generated_torus(tmp_path):
     assert r["faces"] == 40 * 16 and r["genus"] == 1 and set(r["seconds"]) == {"load", "parameterize", "remesh"}
     assert jp.load(out).topology.genus == 1
     assert main(["manifold", str(src), "-o", str(out), "--base-faces", "21"]) == 3     # odd count
+
+
+def test_folded_faces_counts_remesh_faces_turned_against_the_input():
+    """``ManifoldReport.folded`` (session 22's held-out sweep: level-4 remeshes of a
+    marching-cubes double torus had 34-48 folded faces that no field reported)."""
+    from jaxparam.manifold.report import fidelity, folded_faces
+    s = jp.shapes.sphere(2)
+    V, F = np.asarray(s.vertices), np.asarray(s.faces)
+    assert folded_faces(V, F, V, F) == 0
+    G = F.copy()
+    G[[3, 40]] = G[[3, 40]][:, ::-1]
+    assert folded_faces(V, G, V, F) == 2
+    base, param = jp.manifold_map(s, 20, verbose=False)
+    rep = fidelity(param, param.remesh(2), s, samples=2000)
+    assert rep.folded == 0 and "folded" in rep.as_dict()
