@@ -564,11 +564,21 @@ def _ct_patch(U, X, G, simplices, neighbors, s, q):
 
 
 def _clough_tocher(U, X, Uc, Xc, bbox) -> Surface:
-    from scipy.interpolate import CloughTocher2DInterpolator
+    from scipy.interpolate import CloughTocher2DInterpolator  # noqa: F401 - used in interpolant
     from scipy.spatial import Delaunay
 
     tri = Delaunay(Uc)
-    f = CloughTocher2DInterpolator(tri, Xc) if Xc is not None else None
+    # SciPy's gradient iteration stops at an absolute tolerance (1e-6 by default): scaled down
+    # with gradients smaller than 1, so small units are as exact as unit ones (at 1e-3 of the
+    # size the derivative, of the exactly solved interpolant, was 3e-5 off SciPy's values; now
+    # 1.5e-7 as at unit size); larger ones keep 1e-6 (already tighter for them)
+    span = float(np.max(np.ptp(Uc, axis=0)))
+
+    def interpolant(Xv):
+        scale = float(np.max(np.ptp(Xv, axis=0))) / span if span > 0 else 1.0
+        return CloughTocher2DInterpolator(tri, Xv, tol=1e-6 * min(max(scale, 1e-300), 1.0))
+
+    f = interpolant(Xc) if Xc is not None else None
     traced = _traced(U, X)
     cache = {}
 
@@ -583,7 +593,7 @@ def _clough_tocher(U, X, Uc, Xc, bbox) -> Surface:
         return cache["G"]
 
     def host_values(Xv, qv):
-        g = f if f is not None else CloughTocher2DInterpolator(tri, np.asarray(Xv))
+        g = f if f is not None else interpolant(np.asarray(Xv, np.float64))
         return np.asarray(g(np.asarray(qv)), np.float64).reshape(-1, 3)
 
     def host_simplex(qv):
