@@ -118,6 +118,13 @@ def test_point_errors(tmp_path):
     np.testing.assert_array_equal(np.asarray(uv)[50:], np.asarray(uv)[:2])
     with pytest.raises(PointCloudError, match=r"points 50, 51 .*point 50 equals point 7"):
         jp.meshless_map(np.vstack([P, P[[7, 7]]]))
+    # near copies (1e-12 away, distinct in a file) left triangles collapsed to segments
+    # (session 22): refused the same way, and merged on request
+    near = np.vstack([P, P[:3] + 1e-12])
+    with pytest.raises(PointCloudError, match=r"points 50, 51, 52 .*point 50 is 1\.\d+e-12 from point 0"):
+        jp.meshless_map(near)
+    uv, _ = jp.meshless_map(near, merge_duplicates=True)
+    np.testing.assert_array_equal(np.asarray(uv)[50:], np.asarray(uv)[:3])
     with pytest.raises(PointCloudError, match="boundary must be 'circle' or 'square'"):
         jp.meshless_map(P, boundary="plane")
     with pytest.raises(PointCloudError, match="unknown spacing"):

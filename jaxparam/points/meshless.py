@@ -27,6 +27,10 @@ __all__ = ["WEIGHTS", "check_points", "check_map_options", "check_boundary_indic
 WEIGHTS = wts.FAN_KINDS
 
 
+#: Points closer than this share of the bounding-box diagonal count as duplicates.
+NEAR_DUPLICATE = 1e-9
+
+
 def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_index: bool = False,
                  return_order: bool = False):
     """Validate a point set; returns ``(points (M, 3), kept (M,))``, ``kept`` the input
@@ -74,13 +78,28 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
     if maybe.size:
         _, first, inv = np.unique(P[maybe], axis=0, return_index=True, return_inverse=True)
         first = maybe[first][inv.reshape(-1)]             # each point's first equal point
+        # Equal up to NEAR_DUPLICATE of the diagonal counts as equal too: two points 1e-12
+        # apart (distinct in the file) left 76 triangles collapsed to segments, aspect 1e12,
+        # in a 3,000-point set (session 22).  Each point is compared with the first point of
+        # its Morton cell (5e-7 of the box a side: near copies share one).
+        srt = np.argsort(codes[maybe], kind="stable")
+        head = np.r_[True, codes[maybe][srt][1:] != codes[maybe][srt][:-1]]
+        lead = np.empty_like(maybe)
+        lead[srt] = maybe[srt][np.maximum.accumulate(np.where(head, np.arange(srt.size), 0))]
+        tol = NEAR_DUPLICATE * float(np.linalg.norm(np.ptp(P, axis=0)))
+        near = np.linalg.norm(P[maybe] - P[lead], axis=1) <= tol
+        first = np.where(near, np.minimum(lead, first), first)
         dup = maybe[first != maybe]
     if dup.size:
         if not merge_duplicates:
+            j = int(first[maybe == dup[0]][0])
+            gap = float(np.linalg.norm(P[dup[0]] - P[j]))
+            how = f"equals point {j}" if gap == 0 else f"is {gap:.3g} from point {j}"
             raise PointCloudError(
-                f"meshless_map: points {first_few(dup)} duplicate earlier points (point {int(dup[0])} "
-                f"equals point {int(first[maybe == dup[0]][0])}); remove them or pass "
-                "merge_duplicates=True.")
+                f"meshless_map: points {first_few(dup)} duplicate earlier points (point "
+                f"{int(dup[0])} {how}; points closer than {NEAR_DUPLICATE:g} of the diagonal "
+                "count as one); remove them or pass merge_duplicates=True (jaxparam meshless "
+                "--merge-duplicates).")
         kept = np.setdiff1d(kept, dup)
         P = P[kept]
         if return_order:           # the same keys: a duplicate leaves the box unchanged
