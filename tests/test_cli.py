@@ -498,3 +498,12 @@ def test_remesh_with_a_square_boundary_takes_the_area_aware_map(tmp_path):
                      "--boundary", b, "--report", str(rep)]) == 0
         err[b] = json.loads(rep.read_text())["errors"]["hausdorff"][-1]
     assert err["square"] < 2 * err["circle"] + 0.005, err
+
+
+def test_atlas_option_errors_name_the_flags(mesh_file, tmp_path, capsys):
+    """The atlas's messages named its Python options (margin_texels, texture_size) on the
+    command line (session 22's held-out sweep)."""
+    assert main(["-q", "atlas", str(mesh_file), "-o", str(tmp_path / "a.obj"),
+                 "--texture-size", "16", "--margin-texels", "8"]) == 3
+    err = capsys.readouterr().err
+    assert "--margin-texels must be >= 0" in err and "margin_texels" not in err

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from ..atlas import atlas
 from ..clock import StageClock
+from ..errors import MeshError, SolverError
 from ..io import save
 from ..options import default_of
 from ..energies import ENERGIES
@@ -83,9 +84,18 @@ def cmd_atlas(args) -> int:
     clock = StageClock()
     mesh = load(args.mesh)
     clock("load")
-    a = atlas(mesh, energy=canonical(args.energy), texture_size=args.texture_size,
-              margin_texels=args.margin_texels, cone=args.cone, compact=args.compact,
-              start=canonical(args.start))
+    try:
+        a = atlas(mesh, energy=canonical(args.energy), texture_size=args.texture_size,
+                  margin_texels=args.margin_texels, cone=args.cone, compact=args.compact,
+                  start=canonical(args.start))
+    except (MeshError, SolverError) as exc:     # the messages name the Python options
+        text = str(exc).replace("margin_texels", "--margin-texels").replace(
+            "texture_size", "--texture-size")
+        if text == str(exc):
+            raise
+        if isinstance(exc, SolverError):
+            raise SolverError(text, stage=exc.stage) from None
+        raise type(exc)(text) from None
     clock("atlas")
     written = []
     try:

@@ -98,8 +98,7 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
             raise PointCloudError(
                 f"meshless_map: points {first_few(dup)} duplicate earlier points (point "
                 f"{int(dup[0])} {how}; points closer than {NEAR_DUPLICATE:g} of the diagonal "
-                "count as one); remove them or pass merge_duplicates=True (jaxparam meshless "
-                "--merge-duplicates).")
+                "count as one); remove them or pass merge_duplicates=True.")
         kept = np.setdiff1d(kept, dup)
         P = P[kept]
         if return_order:           # the same keys: a duplicate leaves the box unchanged
