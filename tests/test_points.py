@@ -1,4 +1,5 @@
 import json
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -450,3 +451,20 @@ def test_point_graph_refuses_a_bad_k_or_shape():
         jp.points.point_graph(P, k=40)
     with pytest.raises(jp.PointCloudError, match=r"\(N, 3\) array, got shape \(40, 2\)"):
         jp.points.point_graph(P[:, :2])
+
+
+def test_a_moebius_strip_warns_that_it_is_not_orientable():
+    """Found by session 22's held-out sweep: points of a Moebius strip reconstructed to a mesh
+    that bridges its seam (area 11.6 against 3.78), reported as normal.  The pairs in each
+    other's tangent plane with opposed normals mark the seam; a tube (orientable) has none."""
+    from jaxparam.points.orientation import NonOrientableWarning
+    rng = np.random.default_rng(0)
+    t, s = rng.uniform(0, 2 * np.pi, 3000), rng.uniform(-0.3, 0.3, 3000)
+    mob = np.column_stack([(1 + s * np.cos(t / 2)) * np.cos(t), (1 + s * np.cos(t / 2)) * np.sin(t),
+                           s * np.sin(t / 2)])
+    with pytest.warns(NonOrientableWarning, match=r"\d+ neighbour pairs .*opposed normals.*Moebius"):
+        jp.reconstruct_surface(mob)
+    tube = np.column_stack([np.cos(t), np.sin(t), 2 * s])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NonOrientableWarning)
+        jp.reconstruct_surface(tube)

@@ -18,7 +18,7 @@ from ..errors import PointCloudError, first_few
 from ..options import is_integer
 from ..topology import permute_rows
 from .defaults import K, K_DETECT, K_FRAME, MAX_SLOPE, MIN_NORMAL_DOT
-from .orientation import orient_normals
+from .orientation import orient_normals, warn_non_orientable
 
 __all__ = ["BLOCK", "nearest_neighbours", "knn_graph", "PointGraph", "point_graph", "point_graph_in_order",
            "tangent_frames", "drop_steep_pairs", "global_frame", "spatial_order", "morton_keys",
@@ -181,8 +181,10 @@ def point_graph_in_order(P: np.ndarray, k: int = K, *, radius: float | None = No
         normal, e1 = np.where(flip[:, None], -normal, normal), np.where(flip[:, None], -e1, e1)
     if max_slope < 1:
         # ... and pairs between them (opposed normals) leave the graph with the steep ones.
+        counts = {}
         indptr, indices = drop_steep_pairs(P, indptr, indices, normal, max_slope, exempt,
-                                           min_dot=MIN_NORMAL_DOT)
+                                           min_dot=MIN_NORMAL_DOT, counts=counts)
+        warn_non_orientable(counts["opposed"], N, k if radius is None else None)
         _check_degree(indptr, names, 2)
     deg = np.diff(indptr)
     gap, spacing = np.empty(N), np.empty(N)
@@ -375,14 +377,17 @@ def smallest_eigenvector(C: np.ndarray) -> np.ndarray:
 
 
 def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.ndarray | None = None,
-                     *, min_dot: float = -1.0):
+                     *, min_dot: float = -1.0, counts: dict | None = None):
     """Remove the neighbour pairs ``v, w`` whose direction leaves either tangent plane by more
     than ``|n . (w - v)| / |w - v| > max_slope``, and those whose consistently oriented
     normals are opposed, ``n_v . n_w < min_dot`` (default ``-1``: none): on a thin part of
     the surface (an ear) they join its two sides, and the map would fold that part onto
     itself.  Points that
     would keep fewer than three neighbours keep all of theirs (pairs stay symmetric), and so
-    do the points ``exempt (N,) bool`` (default: none).
+    do the points ``exempt (N,) bool`` (default: none).  With ``counts`` (a dict), its
+    ``"opposed"`` is set to the number of (directed) pairs in each other's tangent planes
+    (slope below 0.1) whose normals are opposed (``n_v . n_w < -0.9``): the seam of a
+    non-orientable set (:data:`~jaxparam.points.orientation.NonOrientableWarning`).
 
     **Returns:** the pruned CSR ``(indptr, indices)``."""
     N = P.shape[0]
@@ -395,11 +400,19 @@ def drop_steep_pairs(P, indptr, indices, normal, max_slope: float, exempt: np.nd
         d = P[idx] - np.repeat(P[r0:r1], deg[r0:r1], axis=0)
         nv, nw = np.repeat(normal[r0:r1], deg[r0:r1], axis=0), normal[idx]
         tilt = np.maximum(np.abs(np.einsum("ij,ij->i", d, nv)), np.abs(np.einsum("ij,ij->i", d, nw)))
-        keep[lo:hi] = tilt <= max_slope * np.sqrt(np.einsum("ij,ij->i", d, d))
-        if min_dot > -1:
-            keep[lo:hi] &= np.einsum("ij,ij->i", nv, nw) >= min_dot
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        keep[lo:hi] = tilt <= max_slope * length
+        if min_dot > -1 or counts is not None:
+            dot = np.einsum("ij,ij->i", nv, nw)
+            if min_dot > -1:
+                keep[lo:hi] &= dot >= min_dot
+            if counts is not None:
+                opposed[r0] = int(np.sum((dot < -0.9) & (tilt < 0.1 * length)))
 
+    opposed = {}
     for_blocks(block, N, DENSE_BLOCK)              # blocks of rows: temporaries stay in cache
+    if counts is not None:
+        counts["opposed"] = sum(opposed.values())
     rows = np.repeat(np.arange(N), deg)
     weak = np.add.reduceat(keep.astype(np.int64), indptr[:-1]) < 3
     if exempt is not None:
