@@ -626,7 +626,7 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
     t = mesh.topology
     if len(t.boundary_loops) != 1:
         raise MeshError(f"remesh: the mesh has {len(t.boundary_loops)} boundary loops; remeshing "
-                        "needs a disk (one boundary loop): fill the holes first.")
+                        "needs a disk (one boundary loop): fill the holes first (e.g. trimesh's fill_holes).")
     if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= 10):
         raise MeshError(f"remesh: levels must be an integer in [0, 10], got {levels!r}.")
     if uv is None:

@@ -248,8 +248,10 @@ def _check_solvable(E: wts.FanEntries, N: int, boundary: np.ndarray, P=None) -> 
         if P is not None and not isinstance(P, jax.core.Tracer):
             x, y, z = (float(c) for c in np.asarray(P)[int(bad[0])])
             where = f" at ({x:.4g}, {y:.4g}, {z:.4g})"
-        piece = (f"; they are {bad.size} of the {N} points, a separate piece of the point set: "
-                 "reconstruct each piece on its own" if bad.size >= 0.1 * N else "")
+        piece = (f"; they are {bad.size} of the {N} points: a separate piece of the point set "
+                 "(reconstruct each piece on its own), or one that the k nearest neighbours do "
+                 "not join to the rest (a sampling much denser along one direction than the "
+                 "other: raise k)" if bad.size >= 0.1 * N else "")
         raise PointCloudError(
             f"meshless_map: {bad.size} points cannot reach the boundary through their neighbours "
             f"(e.g. point {int(bad[0])}{where}); the system (3) would be singular: increase k, use "
