@@ -343,7 +343,8 @@ def test_a_user_energy_that_is_not_a_density_is_refused_when_made():
     assert e.parametric
 
 
-@pytest.mark.parametrize("name", [n for n, e in E.ENERGIES.items()
+@pytest.mark.parametrize("name", [n if n == "mips" else pytest.param(n, marks=pytest.mark.slow)
+                                  for n, e in E.ENERGIES.items()
                                   if isinstance(e.of_J, EF.SingularValueForm)
                                   and e.of_J.invariants is not None])
 def test_symmetric_energy_hessian_is_exact_at_a_conformal_face(name):
@@ -402,8 +403,9 @@ def test_user_energies_are_found_scale_invariant_or_not():
 
 @pytest.mark.parametrize("named, user", [
     ("mips", lambda s1, s2: s1 / s2 + s2 / s1),
-    ("symmetric_dirichlet", lambda s1, s2: s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2),
-    ("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2),
+    pytest.param("symmetric_dirichlet", lambda s1, s2: s1 ** 2 + s2 ** 2 + s1 ** -2 + s2 ** -2,
+                 marks=pytest.mark.slow),
+    pytest.param("arap", lambda s1, s2: (s1 - 1) ** 2 + (s2 - 1) ** 2, marks=pytest.mark.slow),
 ])
 def test_symmetric_user_energy_has_the_named_hessian_at_conformal_faces(named, user):
     """A user's symmetric energy has the named one's Hessian where faces are conformal (a

@@ -105,6 +105,7 @@ def test_unused_vertices_do_not_enter_the_fit(mesh_uv):
                                atol=1e-8)
 
 
+@pytest.mark.slow
 def test_clough_tocher_gradient_is_as_exact_in_small_units():
     """SciPy's gradient iteration stops at an absolute 1e-6: with points 1e-3 of the size, the
     returned derivative (of the exactly solved interpolant) was 3e-5 off finite differences of

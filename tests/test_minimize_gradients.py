@@ -333,7 +333,7 @@ def test_g_vmap_and_jit_through_minimize():
                                np.asarray(jax.grad(loss)(Vs[0])), rtol=0, atol=1e-10)
 
 
-@pytest.mark.parametrize("transform", ["jvp", "jacfwd"])
+@pytest.mark.parametrize("transform", ["jvp", pytest.param("jacfwd", marks=pytest.mark.slow)])
 def test_forward_mode_is_refused_with_the_reverse_mode_remedy(transform):
     """``minimize``'s derivative is a custom VJP: forward mode gets a SolverError naming
     jax.jacrev, not JAX's bare TypeError (eagerly; under jax.jit JAX differentiates the
@@ -348,6 +348,7 @@ def test_forward_mode_is_refused_with_the_reverse_mode_remedy(transform):
         run()
 
 
+@pytest.mark.slow
 def test_a_singular_backward_system_is_a_solver_error_that_names_the_remedy(setup):
     """A hand-written MIPS told it is not scale-invariant keeps the scaling in the Hessian's
     null space: the backward solve fails.  Eagerly that failure was a JaxRuntimeError wrapping
