@@ -484,6 +484,7 @@ def test_compress_of_a_level_0_remesh_says_to_remesh_deeper(mesh_file, tmp_path,
     assert "at 1 level or more (a remesh of level 0 is its base domain alone" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_remesh_with_a_square_boundary_takes_the_area_aware_map(tmp_path):
     """Found by session 22's held-out sweep: ``remesh --boundary square`` took the plain convex
     map, 21 % of the diagonal off at level 4 on a sphere with one face removed (the circle's

@@ -172,6 +172,7 @@ def test_cli_manifold_on_a_generated_torus(tmp_path):
     assert main(["manifold", str(src), "-o", str(out), "--base-faces", "21"]) == 3     # odd count
 
 
+@pytest.mark.slow
 def test_folded_faces_counts_remesh_faces_turned_against_the_input():
     """``ManifoldReport.folded`` (session 22's held-out sweep: level-4 remeshes of a
     marching-cubes double torus had 34-48 folded faces that no field reported)."""

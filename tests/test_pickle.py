@@ -28,6 +28,7 @@ def test_a_fitted_surface_pickles_and_evaluates_the_same(mesh, kind):
     assert back.kind == kind and back.bbox == surf.bbox and back.residual_rms == surf.residual_rms
 
 
+@pytest.mark.slow
 def test_a_surface_fitted_to_traced_points_refuses_to_pickle(mesh):
     uv = np.asarray(jp.convex_map(mesh))
     seen = []

@@ -197,6 +197,7 @@ def test_remesh_gradient_follows_the_sample_points_through_convex_map(name):
     assert abs(g_held - fd) > 0.1 * abs(fd)         # measured 0.54 (disk), 0.84 (graph)
 
 
+@pytest.mark.slow
 def test_traced_remesh_matches_the_concrete_one_and_moves_with_the_uvs():
     for name, mesh, uv, kw in _remesh_cases():
         ref = jp.remesh(mesh, uv, **kw)

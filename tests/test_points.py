@@ -453,6 +453,7 @@ def test_point_graph_refuses_a_bad_k_or_shape():
         jp.points.point_graph(P[:, :2])
 
 
+@pytest.mark.slow
 def test_a_moebius_strip_warns_that_it_is_not_orientable():
     """Found by session 22's held-out sweep: points of a Moebius strip reconstructed to a mesh
     that bridges its seam (area 11.6 against 3.78), reported as normal.  The pairs in each
