@@ -57,6 +57,7 @@ after ``minimize`` has returned, so there its own ``TypeError`` comes instead.)
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -278,9 +279,7 @@ def minimize_traced(mesh, en, base, free_boundary: bool, solver: Solver, stop: S
             unconverged_gradient(strict)
         prob = problem_of(Vh, bh, lh, take=True)
         try:
-            if not inside:
-                return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
-            with host_callback():
+            with host_callback() if inside else contextlib.nullcontext():
                 return _implicit_solve(prob, np.asarray(x, np.float64), np.asarray(g, np.float64))
         except SolverError as exc:
             raise SolverError(
