@@ -452,7 +452,8 @@ def test_the_area_cap_keeps_base_faces_from_holding_a_large_share_of_the_surface
 
 def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
     # With several area caps, the base domain kept is the one whose default remesh the
-    # estimate finds closest to the input; above SELECT_MAX_FACES, the first cap's.
+    # estimate finds closest to the input (before its tips are snapped and its fans
+    # contracted, which is done to the one kept); above SELECT_MAX_FACES, the first cap's.
     from jaxparam.manifold import parameterization as P
     from jaxparam.manifold.relax import estimated_distance, sharpest_vertices
     mesh = plate(2, n=4)
@@ -463,8 +464,8 @@ def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
     for c in caps:
         monkeypatch.setattr(P, "AREA_CAPS", (c,))
         params.append(manifold_map(mesh, 40, verbose=False)[1])
-        X = np.asarray(params[-1].remesh(P.SELECT_LEVEL).mesh.vertices)
-        errs.append(estimated_distance(V, F, sharp, X, params[-1].remesh(P.SELECT_LEVEL).mesh.faces))
+        semi = params[-1]._remesh_from(*params[-1]._samples(P.SELECT_LEVEL, None, snap=False))
+        errs.append(estimated_distance(V, F, sharp, np.asarray(semi.mesh.vertices), semi.mesh.faces))
     assert not np.array_equal(params[0].base_vertices, params[1].base_vertices)
     monkeypatch.setattr(P, "AREA_CAPS", caps)
     _, param = manifold_map(mesh, 40, verbose=False)

@@ -20,6 +20,7 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
+from .fans import chosen_contractions, contract_fans
 from .maps import AREA_CAPS, decimate_caps, decision_positions
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
@@ -224,7 +225,10 @@ def _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, X, X0, error):
     """The samples ``(r, b, pull)`` with the input's tips that their remesh (surface points
     ``X``) cuts off snapped to (manifold/snap.py), when the estimated distance falls below
     ``error`` by more than its rounding (:data:`~jaxparam.manifold.snap.SNAP_GAIN`) and the
-    remesh does not stretch past the plain samples' (``X0``); else the samples given."""
+    remesh does not stretch past the plain samples' (``X0``); else the samples given.
+    The base vertices' fans are contracted first (:func:`_contracted`)."""
+    r, b, pull, X, error = _contracted(S, P, Fm, H, D.F0, vertex_face, sharp, r, b, pull, X, X0,
+                                       error)
     rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, X, P, Fm, sharp, vertex_face,
                                    S.vertex_bary)
     moved = np.flatnonzero(source >= 0)
@@ -235,6 +239,26 @@ def _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, X, X0, error):
     face, bary = face.copy(), bary.copy()
     face[moved], bary[moved] = _vertex_corners(Fm, source[moved], P.shape[0])
     return rs, bs, (face, bary)
+
+
+def _contracted(S, P, Fm, H, F0, vertex_face, sharp, r, b, pull, X, X0, error):
+    """``(r, b, pull, X, error)``: the samples with the base vertices' fans contracted
+    (manifold/fans.py), their surface points and estimated distance, when that distance does
+    not rise (by more than :data:`~jaxparam.manifold.snap.SNAP_GAIN`) and the remesh does not
+    stretch past the plain samples' (``X0``); else the samples given."""
+    G = H.faces[-1]
+    alpha = chosen_contractions(F0, G, r, b, X, _lift_with(S, P, Fm), P, Fm, vertex_face,
+                                S.vertex_bary, max_edge=RELAX_MAX_EDGE_GROWTH * _longest(X0, G))
+    if np.all(alpha == 1.0):
+        return r, b, pull, X, error
+    b2, moved = contract_fans(F0, r, b, alpha)
+    face, bary = (np.copy(a) for a in (pull or S.history.pull_back(r, b, verbose=False)))
+    face[moved], bary[moved] = S.history.pull_back(np.asarray(r)[moved], b2[moved], verbose=False)
+    Xc = np.einsum("kc,kcd->kd", bary, P[Fm[face]])
+    err = np.inf if _stretches(Xc, X0, G) else estimated_distance(P, Fm, sharp, Xc, G)
+    if err > (1 + SNAP_GAIN) * error:
+        return r, b, pull, X, error
+    return r, b2, (face, bary), Xc, err
 
 
 def _snap_gains(P, Fm, sharp, X, Xt, G, moved, error) -> bool:
