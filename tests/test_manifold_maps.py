@@ -357,7 +357,7 @@ def test_relaxed_samples_are_dropped_when_they_stretch_the_remesh():
     # _stretches (the remesh's guard) drops the relaxed samples when the longest remesh edge
     # grows past RELAX_MAX_EDGE_GROWTH; a fake lift (the samples' region index as a position)
     # shows both.
-    from jaxparam.manifold.parameterization import RELAX_MAX_EDGE_GROWTH, _stretches
+    from jaxparam.manifold.finish import RELAX_MAX_EDGE_GROWTH, stretches as _stretches
 
     faces = np.array([[0, 1, 2]])
     lift = lambda r, b: np.c_[r, np.zeros((r.size, 2))].astype(float)  # noqa: E731

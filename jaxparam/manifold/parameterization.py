@@ -11,8 +11,6 @@ from .. import topology as topo
 from .. import weights as wts
 from ..options import choose
 from ..errors import MeshError, SolverError
-from ..distance import point_triangle_distance
-from ..host import face_areas
 from ..mesh import TriMesh, refuse_zero_area
 from ..io import as_mesh
 from ..remesh import Remesh
@@ -20,14 +18,14 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .fans import chosen_contractions, contract_fans
+from .finish import finished, stretches
 from .maps import AREA_CAPS, decimate_caps, decision_positions
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
                     relax_samples, sharpest_vertices)
 from .paths import apply_steps, refine_all, room_for_paths, trace_paths
 from .report import check_closed_manifold, fidelity
-from .snap import SNAP_GAIN, SNAP_ROUNDS, bend, snap_tips
+from .snap import SNAP_ROUNDS
 
 __all__ = ["ManifoldParameterization", "ManifoldStructure", "manifold_map"]
 
@@ -128,34 +126,6 @@ def _solve(S: ManifoldStructure, vertices, name):
     return W, face_uv, vbary
 
 
-RELAX_MAX_EDGE_GROWTH = 1.25
-
-
-def _longest(X, faces) -> float:
-    """The longest edge of the faces ``(m, 3)`` over points ``X``."""
-    return float(np.max(np.linalg.norm(X[faces[:, [1, 2, 0]]] - X[faces], axis=-1)))
-
-
-def _stretches(X, X0, faces) -> bool:
-    """Whether the remesh over points ``X`` has a longest edge on the surface more than
-    :data:`RELAX_MAX_EDGE_GROWTH` times the one over ``X0`` (the unrelaxed samples'): then the
-    relaxed samples are dropped.  Found on a held-out cow (sheared, noisy): relaxed, a few
-    samples landed on the wrong side of a fold, and the remesh got faces that cut across the
-    surface (Hausdorff remesh -> input 1.16 -> 4.07 % of the diagonal, longest edge 5.1 ->
-    12.6 %), while on the shared closed meshes the longest edge changes by 0.83-1.14x."""
-    return (_longest(X, faces) > RELAX_MAX_EDGE_GROWTH * _longest(X0, faces)
-            or _flattest(X, faces) < 1e-6 * _flattest(X0, faces))
-
-
-def _flattest(X, faces) -> float:
-    """The smallest face area (doubled) of the remesh over points ``X``: a relaxed candidate
-    whose smallest face collapses (a million times smaller than the unrelaxed remesh's) is
-    dropped too.  Found on cow with an area-capped base domain: three relaxed level-3 samples
-    landed on one line (area 2e-19 against 1e-7 unrelaxed), and the remesh did not load back
-    (a zero-area face)."""
-    return 2.0 * float(face_areas(X, faces).min())
-
-
 def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H, levels: int,
                      guarded: bool, snap: bool = True):
     """The remesh's samples ``(r (n,), b (n, 3), pulled)`` (base face, barycentric
@@ -168,7 +138,7 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     :class:`~jaxparam.manifold.relax.GridLift` of level ``levels + 1`` (one exact pull-back;
     the level ``levels - 1`` sweeps lift exactly: through the grid they were as often worse as
     better, e.g. decimated-knight sheared 1.26 -> 1.45 % after the choice).
-    ``guarded``: drop a relaxed candidate that stretches the remesh (:func:`_stretches`;
+    ``guarded``: drop a relaxed candidate that stretches the remesh (:func:`~jaxparam.manifold.finish.stretches`;
     the plain samples when both are dropped), then keep the one closest to the input by :func:`~jaxparam.manifold.relax.estimated_distance`
     (relaxing further is not closer everywhere: at level 4 over 100 base faces the finest
     sweeps took cow 0.99 -> 0.85 % and decimated-knight 1.09 -> 0.94 % of the diagonal, but
@@ -201,7 +171,7 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     pulled = [S.history.pull_back(*c, verbose=False) for c in cands]
     Xs = [sweep_lift(*plain)] + [np.einsum("kc,kcd->kd", bb, P[Fm[f]]) for f, bb in pulled]
     # Xs[0]: the plain samples, grid points, which the grid lifts exactly.
-    kept = [i for i in range(1, len(Xs)) if not _stretches(Xs[i], Xs[0], H.faces[-1])]
+    kept = [i for i in range(1, len(Xs)) if not stretches(Xs[i], Xs[0], H.faces[-1])]
     snap, sharp, error = bool(snap and SNAP_ROUNDS), None, None
     if not kept:
         best, (r, b), pull = 0, plain, None
@@ -218,69 +188,12 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     if sharp is None:
         sharp = sharpest_vertices(P, Fm)
         error = estimated_distance(P, Fm, sharp, Xs[best], H.faces[-1])
-    return _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, Xs[best], Xs[0], error)
-
-
-def _snap(S, D, P, Fm, H, vertex_face, sharp, r, b, pull, X, X0, error):
-    """The samples ``(r, b, pull)`` with the input's tips that their remesh (surface points
-    ``X``) cuts off snapped to (manifold/snap.py), when the estimated distance falls below
-    ``error`` by more than its rounding (:data:`~jaxparam.manifold.snap.SNAP_GAIN`) and the
-    remesh does not stretch past the plain samples' (``X0``); else the samples given.
-    The base vertices' fans are contracted first (:func:`_contracted`)."""
-    r, b, pull, X, error = _contracted(S, P, Fm, H, D.F0, vertex_face, sharp, r, b, pull, X, X0,
-                                       error)
-    rs, bs, Xt, source = snap_tips(D, H.faces[-1], r, b, X, P, Fm, sharp, vertex_face,
-                                   S.vertex_bary)
-    moved = np.flatnonzero(source >= 0)
-    if not moved.size or _stretches(Xt, X0, H.faces[-1]) or not _snap_gains(
-            P, Fm, sharp, X, Xt, H.faces[-1], moved, error):
-        return r, b, pull
-    face, bary = pull if pull is not None else S.history.pull_back(r, b, verbose=False)
-    face, bary = face.copy(), bary.copy()
-    face[moved], bary[moved] = _vertex_corners(Fm, source[moved], P.shape[0])
-    return rs, bs, (face, bary)
-
-
-def _contracted(S, P, Fm, H, F0, vertex_face, sharp, r, b, pull, X, X0, error):
-    """``(r, b, pull, X, error)``: the samples with the base vertices' fans contracted
-    (manifold/fans.py), their surface points and estimated distance, when that distance does
-    not rise (by more than :data:`~jaxparam.manifold.snap.SNAP_GAIN`) and the remesh does not
-    stretch past the plain samples' (``X0``); else the samples given."""
-    G = H.faces[-1]
-    alpha = chosen_contractions(F0, G, r, b, X, _lift_with(S, P, Fm), P, Fm, vertex_face,
-                                S.vertex_bary, max_edge=RELAX_MAX_EDGE_GROWTH * _longest(X0, G))
-    if np.all(alpha == 1.0):
-        return r, b, pull, X, error
-    b2, moved = contract_fans(F0, r, b, alpha)
-    face, bary = (np.copy(a) for a in (pull or S.history.pull_back(r, b, verbose=False)))
-    face[moved], bary[moved] = S.history.pull_back(np.asarray(r)[moved], b2[moved], verbose=False)
-    Xc = np.einsum("kc,kcd->kd", bary, P[Fm[face]])
-    err = np.inf if _stretches(Xc, X0, G) else estimated_distance(P, Fm, sharp, Xc, G)
-    if err > (1 + SNAP_GAIN) * error:
-        return r, b, pull, X, error
-    return r, b2, (face, bary), Xc, err
-
-
-def _snap_gains(P, Fm, sharp, X, Xt, G, moved, error) -> bool:
-    """Whether the snapped remesh ``(Xt, G)`` is closer to the input ``(P, Fm)`` than the one
-    over ``X`` (whose estimated distance is ``error``): the estimate
-    (:func:`~jaxparam.manifold.relax.estimated_distance`) joined with how far the faces around
-    the ``moved`` samples stand off the input (:func:`~jaxparam.manifold.snap.bend`), is lower
-    by more than :data:`~jaxparam.manifold.snap.SNAP_GAIN`; or it is not higher and the sharp
-    vertices' distance to the remesh is lower.  (Decimated-knight's estimate peaks on a long
-    edge across a saddle, which no snap touches: strictly lower refused its snapped tips,
-    0.53 -> 0.51 % of the diagonal.)"""
-    around = np.isin(G, moved).any(1)
-    before = max(error, float(bend(X[G[around]], P, Fm).max(initial=0.0)))
-    after = max(estimated_distance(P, Fm, sharp, Xt, G), float(bend(Xt[G[around]], P, Fm).max(initial=0.0)))
-    if after < (1 - SNAP_GAIN) * before:
-        return True
-    tips = lambda Y: point_triangle_distance(P[sharp], Y, G)[0].max(initial=0.0)
-    return after <= (1 + SNAP_GAIN) * before and tips(Xt) < (1 - SNAP_GAIN) * tips(X)
+    return finished(S.history, S.vertex_bary, D, P, Fm, H.faces[-1], vertex_face, sharp, r, b, pull,
+                    Xs[best], Xs[0], error, both_orders=Fm.shape[0] <= SELECT_MAX_FACES)
 
 
 def _snap_chosen(param, levels: int, H, r, b, pull):
-    """:func:`_snap` for samples that :func:`_relaxed_samples` chose without snapping (the
+    """:func:`~jaxparam.manifold.finish.finished` for samples that :func:`_relaxed_samples` chose without snapping (the
     base domain :func:`_maps_route` keeps): what it needs is made again here."""
     S = param.structure
     P = _centred(S.positions)
@@ -292,7 +205,8 @@ def _snap_chosen(param, levels: int, H, r, b, pull):
     sharp = sharpest_vertices(P, Fm)
     error = estimated_distance(P, Fm, sharp, X, H.faces[-1])
     D = BaseDomain(P[param.base_vertices], F0)
-    return _snap(S, D, P, Fm, H, param.vertex_face, sharp, r, b, pull, X, X0, error)
+    return finished(S.history, S.vertex_bary, D, P, Fm, H.faces[-1], param.vertex_face, sharp, r, b,
+                    pull, X, X0, error, both_orders=Fm.shape[0] <= SELECT_MAX_FACES)
 
 
 def _centred(P: np.ndarray) -> np.ndarray:
@@ -307,15 +221,6 @@ def _lift_with(S: ManifoldStructure, P: np.ndarray, Fm: np.ndarray):
         face, bb = S.history.pull_back(region, bary, verbose=False)
         return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
     return lift
-
-
-def _vertex_corners(F: np.ndarray, v: np.ndarray, n: int):
-    """A face of ``F (m, 3)`` at each vertex ``v (k,)`` and the one-hot barycentric
-    coordinates ``(k, 3)`` of the vertex there: ``((k,), (k, 3))``."""
-    face_at = np.empty(n, np.int64)
-    face_at[F.ravel()] = np.arange(F.size) // 3
-    f = face_at[v]
-    return f, (F[f] == v[:, None]).astype(np.float64)
 
 
 @jax.tree_util.register_pytree_node_class
@@ -422,8 +327,9 @@ class ManifoldParameterization:
         like the point location), so ``param.with_vertices(V0).remesh(j)`` is
         ``param.remesh(j)`` and the remesh stays differentiable in the positions.  By default
         (``relax=None``) the relaxed samples are kept only if the remesh's longest edge grows
-        by at most :data:`RELAX_MAX_EDGE_GROWTH` over the unrelaxed one's (else the unrelaxed
-        samples are used); ``relax=True`` keeps them regardless.  With
+        by at most :data:`~jaxparam.manifold.finish.RELAX_MAX_EDGE_GROWTH` over the
+        unrelaxed one's (else the unrelaxed samples are used); ``relax=True`` keeps them
+        regardless.  With
         :data:`~jaxparam.manifold.relax.FINEST_ITERATIONS` the finest samples are then relaxed
         too, and by default, of the relaxed candidates that pass the guard (relaxed at level
         ``levels - 1``; relaxed at the finest level too), the one closest to the input by
