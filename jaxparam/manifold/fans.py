@@ -40,7 +40,7 @@ from ..distance import grid_barycentric, point_triangle_distance
 __all__ = ["contract_fans", "chosen_contractions", "regions", "region_count", "base_edges", "ALPHAS", "RADIUS",
            "EDGE_RADIUS", "FAN_GAIN", "SCREEN_POINTS", "SCREEN_SHARE", "IN_SHARE", "INPUT_GRID"]
 
-#: The contractions tried at each base vertex (1: none).
+#: The contractions tried in each region, 1 (none: the distances it is measured against) first.
 ALPHAS = (1.0, 0.8, 0.65, 0.5, 0.4, 0.3)
 #: The region of a base vertex: samples whose barycentric coordinate at it exceeds ``1 - RADIUS``.
 RADIUS = 0.3
@@ -141,6 +141,8 @@ def chosen_contractions(F0: np.ndarray, G: np.ndarray, r: np.ndarray, b: np.ndar
     the surface points of base-domain points; ``(P, Fm)`` the input mesh, ``vertex_face``,
     ``vertex_bary`` its vertices' places in the base domain; ``max_edge`` the longest remesh
     edge allowed (units of ``P``)."""
+    if alphas[0] != 1.0:
+        raise ValueError("chosen_contractions: alphas must start with 1 (no contraction).")
     n_regions = region_count(F0)
     alpha = np.ones(n_regions)
     r = np.asarray(r, np.int64)
@@ -161,8 +163,7 @@ def chosen_contractions(F0: np.ndarray, G: np.ndarray, r: np.ndarray, b: np.ndar
         own = corner_region[faces, c] >= 0
         np.maximum.at(screen, corner_region[faces[own], c], mid_d[own])
     tried = screen >= SCREEN_SHARE * screen.max()
-    keep = (np.where(corner_region[faces] >= 0, tried[np.maximum(corner_region[faces], 0)], False)).any(1)
-    faces = faces[keep]
+    faces = faces[(tried[np.maximum(corner_region[faces], 0)] & (corner_region[faces] >= 0)).any(1)]
     pts = SCREEN_POINTS.shape[0]
     # The input's points in the tried regions and a margin around them (the remesh faces
     # across a region's rim stretch): its vertices, and a grid on its faces much longer than
