@@ -66,14 +66,16 @@ def test_a_contraction_keeps_every_point_in_its_base_face_and_edge_and_moves_it_
         assert np.all(np.diff(dist) > 0)
 
 
-def _sphere_param():
+@pytest.fixture(scope="module")
+def sphere_param():
+    """A sphere (1,280 faces) over 20 base faces: one manifold_map for the tests below."""
     mesh = jp.shapes.sphere(3)
     base, param = manifold_map(mesh, 20, verbose=False)
     return mesh, param
 
 
-def test_contracted_dyadic_samples_keep_every_triangle_turned_the_right_way():
-    mesh, param = _sphere_param()
+def test_contracted_dyadic_samples_keep_every_triangle_turned_the_right_way(sphere_param):
+    mesh, param = sphere_param
     F0b = np.asarray(param.base_faces)
     H = dyadic_hierarchy(F0b, int(F0b.max()) + 1, 3)
     _, r, b, _ = param._samples(3, False)
@@ -84,14 +86,14 @@ def test_contracted_dyadic_samples_keep_every_triangle_turned_the_right_way():
         assert np.all(signed_chart_areas(D, H.faces[-1], r, b2) > 0)
 
 
-def test_a_fan_blown_up_is_contracted_back_and_the_remesh_comes_closer():
+def test_a_fan_blown_up_is_contracted_back_and_the_remesh_comes_closer(sphere_param):
     # The level-3 samples of a sphere with the fans of three base vertices blown up (alpha 2,
     # the inverse of a contraction): their faces near the vertices are large and stand off the
     # sphere.  chosen_contractions contracts those (and perhaps base edges at them) and no
     # other region, and the remesh is then closer to the input around them.
     from jaxparam.manifold.snap import bend
 
-    mesh, param = _sphere_param()
+    mesh, param = sphere_param
     P, Fm = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     S = param.structure
     F0b = np.asarray(param.base_faces)
