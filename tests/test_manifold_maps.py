@@ -604,6 +604,7 @@ def test_a_snap_pushes_no_other_tip_off_and_no_face_off_the_input():
     import jaxparam.manifold.parameterization as pz
     from jaxparam.distance import point_triangle_distance
     from jaxparam.manifold.relax import BaseDomain, sharpest_vertices
+    from jaxparam.manifold.finish import lift_with
     from jaxparam.manifold.snap import bend, snap_tips
 
     m = jp.shapes.sphere(3)
@@ -617,7 +618,7 @@ def test_a_snap_pushes_no_other_tip_off_and_no_face_off_the_input():
     H, r, b, pull = param._samples(3, None, snap=False)
     S, G = param.structure, H.faces[-1]
     P, Fm = pz._centred(S.positions), np.asarray(param.mesh.faces, np.int64)
-    X = pz._lift_with(S, P, Fm)(r, b) if pull is None else np.einsum("kc,kcd->kd", pull[1], P[Fm[pull[0]]])
+    X = lift_with(S.history, P, Fm)(r, b) if pull is None else np.einsum("kc,kcd->kd", pull[1], P[Fm[pull[0]]])
     tips = sharpest_vertices(P, Fm)
     D = BaseDomain(P[param.base_vertices], np.asarray(param.base_faces, np.int64))
     _, _, Xs, source = snap_tips(D, G, r, b, X, P, Fm, tips, param.vertex_face, S.vertex_bary, rounds=1)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..distance import grid_barycentric, point_triangle_distance
+from .snap import longest_edges
 
 __all__ = ["contract_fans", "chosen_contractions", "regions", "region_count", "base_edges", "ALPHAS", "RADIUS",
            "EDGE_RADIUS", "FAN_GAIN", "SCREEN_POINTS", "SCREEN_SHARE", "IN_SHARE", "INPUT_GRID"]
@@ -171,7 +172,7 @@ def chosen_contractions(F0: np.ndarray, G: np.ndarray, r: np.ndarray, b: np.ndar
     iv, _, _, _ = regions(F0, np.asarray(vertex_face, np.int64), np.asarray(vertex_bary), 1.5)
     inside_input = (iv >= 0) & tried[np.maximum(iv, 0)]
     T = P[Fm]
-    big = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(1) > 3.0 * np.median(
+    big = longest_edges(T) > 3.0 * np.median(
         np.linalg.norm(X[G] - X[np.roll(G, 1, axis=1)], axis=2))
     in_faces = np.flatnonzero(inside_input[Fm].any(1) & big)
     in_points = np.concatenate([P[inside_input], np.einsum("pc,fcd->fpd", INPUT_GRID,
@@ -191,7 +192,7 @@ def chosen_contractions(F0: np.ndarray, G: np.ndarray, r: np.ndarray, b: np.ndar
         out = point_triangle_distance(Q, P, Fm)[0].reshape(faces.size, pts).max(1)
         # A face longer than the guard allows rules the contraction out (the remesh is kept
         # only if its longest edge stays within max_edge, ManifoldParameterization.remesh).
-        out[np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(1) > max_edge] = np.inf
+        out[longest_edges(T) > max_edge] = np.inf
         for c in range(3):
             own = corner_region[faces, c] >= 0
             np.maximum.at(outs[i], corner_region[faces[own], c], out[own])

@@ -17,7 +17,7 @@ from .fans import chosen_contractions, contract_fans, regions
 from .relax import estimated_distance
 from .snap import SNAP_GAIN, bend, snap_tips
 
-__all__ = ["finished", "stretches", "longest", "flattest", "RELAX_MAX_EDGE_GROWTH"]
+__all__ = ["finished", "lift_with", "stretches", "longest", "flattest", "RELAX_MAX_EDGE_GROWTH"]
 
 #: The largest growth of the remesh's longest edge (over the plain samples') that relaxed,
 #: snapped or contracted samples may bring (:func:`stretches`).
@@ -69,7 +69,7 @@ def finished(history, vertex_bary, D, P, Fm, G, vertex_face, sharp, r, b, pull, 
     sharpest vertices, ``X0`` the plain samples' surface points, ``error`` the estimated
     distance of the remesh over ``X``."""
     c = (history, vertex_bary, D, P, Fm, G, vertex_face, sharp)
-    alpha = chosen_contractions(D.F0, G, r, b, X, _lift_with(history, P, Fm), P, Fm, vertex_face,
+    alpha = chosen_contractions(D.F0, G, r, b, X, lift_with(history, P, Fm), P, Fm, vertex_face,
                                 vertex_bary, max_edge=RELAX_MAX_EDGE_GROWTH * longest(X0, G))
     *snapped, moved = _snapped(c, r, b, pull, X, error, X0)
     if np.all(alpha == 1.0):
@@ -145,7 +145,7 @@ def _vertex_corners(F: np.ndarray, v: np.ndarray, n: int):
     return f, (F[f] == v[:, None]).astype(np.float64)
 
 
-def _lift_with(history, P: np.ndarray, Fm: np.ndarray):
+def lift_with(history, P: np.ndarray, Fm: np.ndarray):
     """``lift(r (k,), b (k, 3)) -> (k, 3)``: base-domain points pulled back through the
     decimation's ``history`` onto the input faces ``Fm`` over positions ``P``."""
     def lift(region, bary):

@@ -18,7 +18,7 @@ from ..subdivision import dyadic_hierarchy, dyadic_refine, split_corner_values
 from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
-from .finish import finished, stretches
+from .finish import finished, lift_with, stretches
 from .maps import AREA_CAPS, decimate_caps, decision_positions
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
@@ -147,14 +147,14 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
     (:func:`~jaxparam.manifold.snap.snap_tips`; ``vertex_face (N,)`` and ``S.vertex_bary``
     place them in the base domain), when the estimate finds the snapped remesh closer
     (``snap``; :func:`_maps_route` chooses its base domain unsnapped and snaps the chosen one's
-    samples only, :func:`_snap_chosen`).
+    samples only, :func:`_finish_chosen`).
 
     Everything here runs on the positions centred on their bounding box: the choices compare
     lengths and distances, and on coordinates far from the origin their rounding decided some
     of them (a jittered bumpy sphere moved by 1e3 got another remesh, 1.3 % of its diagonal
     apart).  Only the samples' base faces and coordinates, and their pull-back, come out."""
     P = _centred(S.positions)
-    lift = _lift_with(S, P, Fm)
+    lift = lift_with(S.history, P, Fm)
     D = BaseDomain(P[base_vertices], F0)
     m0, n = F0.shape[0], H.counts[-1]
     use_grid = GridLift.points(m0, levels + 1) <= GRID_MAX_POINTS
@@ -192,14 +192,15 @@ def _relaxed_samples(S: ManifoldStructure, base_vertices, vertex_face, Fm, F0, H
                     Xs[best], Xs[0], error, both_orders=Fm.shape[0] <= SELECT_MAX_FACES)
 
 
-def _snap_chosen(param, levels: int, H, r, b, pull):
-    """:func:`~jaxparam.manifold.finish.finished` for samples that :func:`_relaxed_samples` chose without snapping (the
-    base domain :func:`_maps_route` keeps): what it needs is made again here."""
+def _finish_chosen(param, levels: int, H, r, b, pull):
+    """:func:`~jaxparam.manifold.finish.finished` for samples that :func:`_relaxed_samples`
+    chose unfinished (the base domain :func:`_maps_route` keeps): what it needs is made again
+    here."""
     S = param.structure
     P = _centred(S.positions)
     Fm = np.asarray(param.mesh.faces, np.int64)
     F0 = np.asarray(param.base_faces, np.int64)
-    lift = _lift_with(S, P, Fm)
+    lift = lift_with(S.history, P, Fm)
     X = lift(r, b) if pull is None else np.einsum("kc,kcd->kd", pull[1], P[Fm[pull[0]]])
     X0 = lift(*_dyadic_samples(F0, H, levels))
     sharp = sharpest_vertices(P, Fm)
@@ -212,15 +213,6 @@ def _snap_chosen(param, levels: int, H, r, b, pull):
 def _centred(P: np.ndarray) -> np.ndarray:
     """Positions ``P (n, 3)`` less the centre of their bounding box."""
     return P - 0.5 * (P.min(0) + P.max(0))
-
-
-def _lift_with(S: ManifoldStructure, P: np.ndarray, Fm: np.ndarray):
-    """``lift(r (k,), b (k, 3)) -> (k, 3)``: base-domain points pulled back through the
-    decimation's history onto the input faces ``Fm`` over positions ``P``."""
-    def lift(region, bary):
-        face, bb = S.history.pull_back(region, bary, verbose=False)
-        return np.einsum("kc,kcd->kd", bb, P[Fm[face]])
-    return lift
 
 
 @jax.tree_util.register_pytree_node_class
@@ -565,7 +557,7 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
             return out
         if sharp is None:
             sharp = sharpest_vertices(V, Fm)
-        samples = out[1]._samples(SELECT_LEVEL, None, snap=False)   # snapped once chosen
+        samples = out[1]._samples(SELECT_LEVEL, None, snap=False)   # snapped and contracted once chosen
         semi = out[1]._remesh_from(*samples)
         err = estimated_distance(V, Fm, sharp, np.asarray(semi.mesh.vertices), semi.mesh.faces)
         if best is None or err < best[0]:
@@ -574,7 +566,7 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     # and most callers ask for next, then only lifts them (the same arrays, not relaxed again).
     _, (base, param), (H, r, b, pulled) = best
     if SNAP_ROUNDS:
-        r, b, pulled = _snap_chosen(param, SELECT_LEVEL, H, r, b, pulled)
+        r, b, pulled = _finish_chosen(param, SELECT_LEVEL, H, r, b, pulled)
     S = replace(param.structure, samples=((SELECT_LEVEL, r, b, pulled),))
     return base, replace(param, structure=S)
 

@@ -27,7 +27,7 @@ import numpy as np
 from ..distance import grid_barycentric, point_triangle_distance
 from .relax import BaseDomain, signed_chart_areas
 
-__all__ = ["snap_tips", "bend", "SNAP_ROUNDS", "SNAP_SHARE", "BEND", "CANDIDATES", "SNAP_GAIN"]
+__all__ = ["snap_tips", "bend", "longest_edges", "SNAP_ROUNDS", "SNAP_SHARE", "BEND", "CANDIDATES", "SNAP_GAIN"]
 
 #: Barycentric points measured on each remesh face around a moved sample: a grid of step 1/6
 #: without the corners (which lie on the input).  Seven points (centroid, edge midpoints, near
@@ -179,7 +179,7 @@ def _alone(D, faces, ptr, corner_order, r, b, X, pinned, area0, P, F, s, v, vert
     T, T0 = X2[tri], X[faces[fid]]
     good = ((signed_chart_areas(D, tri, r2, b2) > 1e-3 * area0[fid])
             & ~_across_a_corner(D, tri, r2, pinned2)
-            & (_longest_edges(T) <= _longest_edges(X[faces]).max())
+            & (longest_edges(T) <= longest_edges(X[faces]).max())
             & (_doubled_areas(T) >= 1e-3 * _doubled_areas(T0)))
     off = np.zeros(p)
     np.maximum.at(off, pair, bend(X2[tri], P, F, _SCREEN_POINTS))
@@ -204,7 +204,7 @@ def _faces_around(ptr, corner_order, s):
     return corner_order[at] // 3, np.repeat(np.arange(s.size), counts)
 
 
-def _longest_edges(T: np.ndarray) -> np.ndarray:
+def longest_edges(T: np.ndarray) -> np.ndarray:
     """``(k,)``: the longest edge of each triangle ``T (k, 3, 3)``."""
     return np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(1)
 
