@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..distance import grid_barycentric, point_triangle_distance
-from .relax import BaseDomain, signed_chart_areas
+from .relax import BaseDomain, around_a_vertex, signed_chart_areas
 
 __all__ = ["snap_tips", "bend", "longest_edges", "SNAP_ROUNDS", "SNAP_SHARE", "BEND", "CANDIDATES", "SNAP_GAIN"]
 
@@ -135,6 +135,7 @@ def snap_tips(D: BaseDomain, faces: np.ndarray, r: np.ndarray, b: np.ndarray, X:
             off = off_face[fs]
             bad = fs[~(signed_chart_areas(D, faces[fs], r1, b1) > 1e-3 * area0[fs])
                      | _across_a_corner(D, faces[fs], r1, pinned)
+                     | around_a_vertex(D, faces[fs], r1, b1)
                      | (off > BEND * np.where(moved[faces[fs]], limit[faces[fs]], np.inf).min(1))]
             back = np.zeros(n, bool)
             back[faces[bad].ravel()] = True
@@ -179,6 +180,7 @@ def _alone(D, faces, ptr, corner_order, r, b, X, pinned, area0, P, F, s, v, vert
     T, T0 = X2[tri], X[faces[fid]]
     good = ((signed_chart_areas(D, tri, r2, b2) > 1e-3 * area0[fid])
             & ~_across_a_corner(D, tri, r2, pinned2)
+            & ~around_a_vertex(D, tri, r2, b2)
             & (longest_edges(T) <= longest_edges(X[faces]).max())
             & (_doubled_areas(T) >= 1e-3 * _doubled_areas(T0)))
     off = np.zeros(p)
