@@ -1,6 +1,8 @@
 """The relaxed samples of a closed remesh (jaxparam/manifold/relax.py, issue 13): edge midpoints
-land where the dyadic grid puts them however their ends are recorded, and no remesh triangle
-turns over in the base domain."""
+land where the dyadic grid puts them however their ends are recorded, a point on a base edge
+is the same point from either side, a triangle through the three faces at a base vertex of
+valence 3 is found, and no level-4 triangle turns over in the base domain where its relaxed
+level-3 parent does not."""
 import numpy as np
 import pytest
 
@@ -144,8 +146,8 @@ def test_no_midpoint_triangle_turns_over_where_its_parent_does_not():
 
 @pytest.mark.slow          # 20 s
 def test_no_midpoint_triangle_of_cow_turns_over_where_its_parent_does_not():
-    """Cow at level 4 over 100 base faces had 7 turned over (parents standing) before the
-    midpoints were drawn in a face both ends share."""
+    """Cow at level 4 over 100 base faces had level-4 triangles turned over in the base domain
+    (7 in its final samples) before the midpoints were drawn in a face both ends share."""
     turned, decided = _children_turned_over(jp.load(data_path("meshes", "cow.off")), 100)
     assert decided > 0.97
     assert turned == 0
