@@ -247,8 +247,8 @@ def around_a_vertex(D: BaseDomain, tri: np.ndarray, r: np.ndarray, b: np.ndarray
     0.536 % of the diagonal; session 24)."""
     tri = np.asarray(tri, np.int64)
     pinned = (b[tri] > 1e-12).sum(2) == 1                             # (k, 3)
-    has, g, _ = D.other_side(r, b)
-    opts = np.stack([r[tri], g[tri]], 2)                              # (k, 3, 2)
+    _, g, _ = D.other_side(r[tri.ravel()], b[tri.ravel()])
+    opts = np.stack([r[tri], g.reshape(tri.shape)], 2)               # (k, 3, 2)
     out = ~pinned.any(1)
     best = np.full(tri.shape[0], 3)
     for a in range(2):
@@ -285,24 +285,20 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
     hi = np.concatenate([i, j])                            # half-edges (from, to)
     hj = np.concatenate([j, i])
 
-    def seen_from(rs, v, r, b):
+    def seen_from(rs, v, r, b, alt=None):
         """Sample ``v``'s base face and coordinates as seen from base faces ``rs``: a base
         vertex of ``rs``, or a point on an edge of ``rs`` written in the face across it, is
         written in ``rs`` itself (exact, no unfolding around a base vertex, whose sectors
-        need not close up)."""
+        need not close up).  ``alt``: ``D.other_side(r, b)`` of every sample, if made."""
         rv, bv = r[v].copy(), b[v].copy()
         corner = D.F0[rs] == at_vertex[v][:, None]
         own = pinned[v] & (corner[:, 0] | corner[:, 1] | corner[:, 2])
         rv[own] = rs[own]
         bv[own] = corner[own].astype(np.float64)
-        has, g, bg = D.other_side(r[v], b[v])
+        has, g, bg = D.other_side(r[v], b[v]) if alt is None else (a[v] for a in alt)
         across = has & (g == rs) & (rv != rs)
         rv[across], bv[across] = rs[across], bg[across]
         return rv, bv
-
-    def shares(rs, v, r, b):
-        """Whether sample ``v`` can be written in base faces ``rs`` exactly (:func:`seen_from`)."""
-        return seen_from(rs, v, r, b)[0] == rs
 
     def straddling(r, b, es):
         """Whether edges ``es`` have ends in base faces that share no edge (drawn across a
@@ -315,17 +311,18 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
                 shared += Fi[:, a] == Fj[:, c]
         return shared < 2
 
-    def midpoints(r, b):
+    def midpoints(r, b, alt):
         # Drawn in end i's face, or in the face across the edge i lies on when only that one
         # holds j too: a point on a base edge seen from the other side of a base vertex is
         # unfolded around the vertex, and the midpoint lands in the wrong sector (cow: a
         # level-3 triangle at a base vertex of valence 3, its ends on two edges recorded in
         # the two other faces; its children turned over).
         ri, bi = r[i].copy(), b[i].copy()
-        has, g, bg = D.other_side(ri, bi)
-        switch = has & ~shares(ri, j, r, b) & shares(g, j, r, b)
+        has, g, bg = (a[i] for a in alt)
+        switch = (has & (seen_from(ri, j, r, b, alt)[0] != ri)
+                  & (seen_from(g, j, r, b, alt)[0] == g))
         ri[switch], bi[switch] = g[switch], bg[switch]
-        rj, bj = seen_from(ri, j, r, b)
+        rj, bj = seen_from(ri, j, r, b, alt)
         found, pj = D.carry(ri, rj, bj)
         pm = 0.5 * (D.point(ri, bi) + pj)
         rm, bm = D.locate(ri, pm)
@@ -335,12 +332,13 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
 
     area0 = np.abs(signed_chart_areas(D, faces, r, b))
     for _ in range(int(iterations)):
-        rm, bm = midpoints(r, b)
+        alt = D.other_side(r, b)
+        rm, bm = midpoints(r, b, alt)
         X = lift(np.concatenate([r, rm]), np.concatenate([b, bm]))
         Xv, Xm = X[:n], X[n:]
         L3 = np.linalg.norm(Xv[i] - Xv[j], axis=1)
         dev = np.linalg.norm(Xm - 0.5 * (Xv[i] + Xv[j]), axis=1)
-        rq, bq = seen_from(r[hi], hj, r, b)
+        rq, bq = seen_from(r[hi], hj, r, b, alt)
         found, q = D.carry(r[hi], rq, bq)                  # neighbour in the sample's chart
         p = D.point(r, b)
         L2 = np.linalg.norm(p[hi] - q, axis=1)
@@ -371,7 +369,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
             r1[back], b1[back] = r[back], b[back]
             changed = back
         r, b = r1, b1
-    rm, bm = midpoints(r, b)
+    rm, bm = midpoints(r, b, D.other_side(r, b))
     return np.concatenate([r, rm]), np.concatenate([b, bm])
 
 
