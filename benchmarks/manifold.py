@@ -5,8 +5,10 @@ Tables printed:
 1. **Success over base-face counts**: every closed mesh of ``../shared/data/meshes`` at
    ``base_faces`` 50, 100, 200, 400 with defaults (``method="maps"``): whether
    ``jp.manifold_map`` succeeds, its seconds, the level-4 remesh's seconds, Hausdorff and
-   RMS both ways (``jp.distance.surface_distance``, % of the bounding-box diagonal) and the
-   worst area distortion.  ``--paths`` adds the old path-tracing route beside it.
+   RMS both ways (``jp.distance.surface_distance``, % of the bounding-box diagonal), the
+   worst area distortion, the turned-over pieces of the map (``flipped``), the faces whose
+   straight drawing ``face_uv`` is turned over (``drawn``) and the input vertices off their
+   place in the base domain (``misplaced``).  ``--paths`` adds the old path-tracing route beside it.
 2. **Scaling**: bunny refined (midpoint 1-to-4 splits) to about 10k, 30k, 100k (and 400k
    with ``--big``) faces, to 100 base faces at level 4: seconds per stage.
 3. **Fig. 26**: about 100 base faces, level 3, lifted wavelets keeping 2 % of the input's
@@ -46,7 +48,7 @@ def success_table(jp, method: str, counts=(50, 100, 200, 400), face_grid: int = 
     print(f"\n## success over base-face counts (method={method!r}, level 4, face grid {face_grid})")
     print(f"{'mesh':>20s} {'genus':>5s} {'faces':>6s} {'base':>5s} {'result':>8s} {'map s':>6s} "
           f"{'remesh s':>8s} {'H %':>7s} {'H in %':>7s} {'H out %':>7s} {'RMS in %':>8s} {'RMS out %':>9s} "
-          f"{'area':>6s}")
+          f"{'area':>6s} {'flipped':>7s} {'drawn':>5s} {'misplaced':>9s}")
     ok = total = 0
     for name in CLOSED:
         mesh = jp.load(DATA / name)
@@ -71,7 +73,8 @@ def success_table(jp, method: str, counts=(50, 100, 200, 400), face_grid: int = 
             ok += 1
             print(f"{name:>20s} {mesh.topology.genus:5d} {mesh.n_faces:6d} {nb:5d} {'ok':>8s} {t_map:6.1f} "
                   f"{t_rem:8.1f} {100 * r.hausdorff:7.3f} {100 * r.hausdorff_in:7.3f} {100 * r.hausdorff_out:7.3f} "
-                  f"{100 * r.rms_in:8.4f} {100 * r.rms_out:9.4f} {r.area_distortion:6.1f}", flush=True)
+                  f"{100 * r.rms_in:8.4f} {100 * r.rms_out:9.4f} {r.area_distortion:6.1f} "
+                  f"{r.flipped:7d} {r.drawn_flipped:5d} {r.misplaced:9d}", flush=True)
     print(f"success: {ok}/{total}")
 
 
