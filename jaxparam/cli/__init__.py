@@ -150,7 +150,10 @@ def _add_manifold(sub) -> None:
                  "traced along mesh edges)", type=str)
     p.add_argument("--fidelity", action="store_true",
                    help="add the remesh's Hausdorff and RMS distances to the input (both ways, "
-                        "relative to the diagonal) and its worst area distortion to --report")
+                        "relative to the diagonal), its worst area distortion, folded remesh "
+                        "faces, the map's turned-over pieces (flipped), faces turned over in "
+                        "the straight drawing face_uv (drawn_flipped) and input vertices off "
+                        "their base triangle (misplaced) to --report")
     add_mirrored(p, "--levels", ManifoldParameterization.remesh, "levels", "subdivision levels")
 
 
