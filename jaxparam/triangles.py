@@ -11,7 +11,7 @@ import numpy as np
 
 from .errors import MeshError, first_few
 
-__all__ = ["orient", "signed_area2", "barycentric", "locate", "cross_norm", "corner_angle",
+__all__ = ["orient", "signed_area2", "doubled_areas", "barycentric", "locate", "cross_norm", "corner_angle",
            "face_angles"]
 
 
@@ -24,6 +24,13 @@ def orient(U: np.ndarray, a, b, c) -> np.ndarray:
 def signed_area2(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
     """``(m,)`` twice the signed areas of the planar faces ``F (m, 3)`` over ``uv (n, 2)``."""
     return orient(uv, F[:, 0], F[:, 1], F[:, 2])
+
+
+def doubled_areas(T: np.ndarray) -> np.ndarray:
+    """``(k,)`` twice the signed areas of triangles ``T (k, 3, 2)`` given by their corners
+    (``nan`` where a corner is)."""
+    return ((T[:, 1, 0] - T[:, 0, 0]) * (T[:, 2, 1] - T[:, 0, 1])
+            - (T[:, 1, 1] - T[:, 0, 1]) * (T[:, 2, 0] - T[:, 0, 0]))
 
 
 def barycentric(T: np.ndarray, p: np.ndarray, *, xp=np) -> np.ndarray:

@@ -8,8 +8,9 @@ import pytest
 
 import jaxparam as jp
 from jaxparam.manifold import manifold_map
-from jaxparam.manifold.overlay import _doubled_area, _drawn_in, base_charts, unfolding
+from jaxparam.manifold.overlay import _drawn_in, base_charts, unfolding
 from jaxparam.manifold.report import fidelity, map_pieces_turned_over, misplaced_vertices
+from jaxparam.triangles import doubled_areas
 from test_manifold_maps import plate
 
 
@@ -34,7 +35,7 @@ def test_no_piece_of_the_map_turns_over_and_every_vertex_is_in_place(torus):
     assert {"flipped", "drawn_flipped", "misplaced"} <= set(rep.as_dict())
     # The drawing is counted apart from the map: the two numbers are not the same quantity.
     drawn = np.asarray(param.face_uv)
-    assert rep.drawn_flipped == int(np.sum(~(_doubled_area(drawn) > 0)))
+    assert rep.drawn_flipped == int(np.sum(~(doubled_areas(drawn) > 0)))
 
 
 def test_a_turned_over_piece_of_the_map_is_counted(torus):
@@ -66,8 +67,8 @@ def test_each_face_is_drawn_in_a_chart_that_does_not_turn_it_over_where_one_exis
     U = unfolding(param.base_faces, param.base_vertices.size,
                   base_charts(np.asarray(mesh.vertices)[param.base_vertices], param.base_faces))
     drawn = [_drawn_in(F, F[:, c], vf, vb, U) for c in range(3)]
-    bad = np.stack([~(_doubled_area(uv) > 0) for _, uv in drawn])
-    chosen_bad = ~(_doubled_area(np.asarray(param.face_uv)) > 0)
+    bad = np.stack([~(doubled_areas(uv) > 0) for _, uv in drawn])
+    chosen_bad = ~(doubled_areas(np.asarray(param.face_uv)) > 0)
     assert bad[0].sum() > chosen_bad.sum() > 0      # the case this checks occurs here
     np.testing.assert_array_equal(chosen_bad, bad.all(0))
     # Each face is drawn in its region's chart: the region is one of its corners' triangles.

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import topology as topo
+from ..triangles import doubled_areas
 from .charts import REFERENCE
 
 __all__ = ["Unfolding", "base_charts", "unfolding", "draw_faces"]
@@ -133,12 +134,13 @@ def draw_faces(faces: np.ndarray, vertex_face: np.ndarray, vertex_bary: np.ndarr
     F = np.asarray(faces, np.int64)
     region, uv = _drawn_in(F, F[:, 0], vertex_face, vertex_bary, U)
     for c in (1, 2):
-        bad = ~(_doubled_area(uv) > 0)
+        bad = ~(doubled_areas(uv) > 0)
         if not bad.any():
             break
         r2, uv2 = _drawn_in(F[bad], F[bad, c], vertex_face, vertex_bary, U)
-        take = np.flatnonzero(bad)[_doubled_area(uv2) > 0]
-        region[take], uv[take] = r2[_doubled_area(uv2) > 0], uv2[_doubled_area(uv2) > 0]
+        good = doubled_areas(uv2) > 0
+        take = np.flatnonzero(bad)[good]
+        region[take], uv[take] = r2[good], uv2[good]
     return region, uv
 
 
@@ -153,8 +155,3 @@ def _drawn_in(F, owner, vertex_face, vertex_bary, U):
         uv[:, c] = np.where(found[:, None], np.einsum("kc,kcd->kd", vertex_bary[v], C), np.nan)
     return region, uv
 
-
-def _doubled_area(uv: np.ndarray) -> np.ndarray:
-    """Twice the signed area ``(k,)`` of triangles ``uv (k, 3, 2)`` (``nan`` where a corner is)."""
-    return ((uv[:, 1, 0] - uv[:, 0, 0]) * (uv[:, 2, 1] - uv[:, 0, 1])
-            - (uv[:, 1, 1] - uv[:, 0, 1]) * (uv[:, 2, 0] - uv[:, 0, 0]))

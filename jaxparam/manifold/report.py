@@ -18,6 +18,7 @@ import numpy as np
 
 from ..distance import point_triangle_distance, surface_distance
 from ..errors import MeshError, TopologyError, first_few
+from ..triangles import doubled_areas
 
 __all__ = ["check_closed_manifold", "ManifoldReport", "fidelity", "folded_faces",
            "map_pieces_turned_over", "misplaced_vertices"]
@@ -115,19 +116,13 @@ def fidelity(param, semi, mesh, *, samples: int = 20_000, seed: int = 0,
     base_area = 0.5 * np.linalg.norm(np.cross(B[:, 1] - B[:, 0], B[:, 2] - B[:, 0]), axis=1)
     ratio = (per / np.maximum(base_area, 1e-300)) * (base_area.sum() / max(per.sum(), 1e-300))
     worst = float(np.max(np.maximum(ratio, 1.0 / np.maximum(ratio, 1e-300))))
-    drawn = int(np.sum(~(_doubled_areas(np.asarray(param.face_uv)) > 0)))
+    drawn = int(np.sum(~(doubled_areas(np.asarray(param.face_uv)) > 0)))
     history = getattr(param.structure, "history", None)
     return ManifoldReport(hausdorff=d.hausdorff, hausdorff_in=d.hausdorff_ab, hausdorff_out=d.hausdorff_ba,
                           rms_in=d.rms_ab, rms_out=d.rms_ba, area_distortion=worst,
                           flipped=drawn if history is None else map_pieces_turned_over(history),
                           levels=int(semi.levels), folded=folded_faces(X, F, V, mesh.faces),
                           drawn_flipped=drawn, misplaced=misplaced_vertices(param))
-
-
-def _doubled_areas(T: np.ndarray) -> np.ndarray:
-    """Twice the signed areas ``(k,)`` of triangles ``T (k, 3, 2)``."""
-    return ((T[:, 1, 0] - T[:, 0, 0]) * (T[:, 2, 1] - T[:, 0, 1])
-            - (T[:, 1, 1] - T[:, 0, 1]) * (T[:, 2, 0] - T[:, 0, 0]))
 
 
 def map_pieces_turned_over(history) -> int:
@@ -139,8 +134,8 @@ def map_pieces_turned_over(history) -> int:
     polygon and the level is a bijection; 0 for the whole map."""
     bad = 0
     for _, _, survive, before, after in history.levels:
-        bad += int(np.sum(~(_doubled_areas(before) > 0)))
-        bad += int(np.sum(~(_doubled_areas(after[survive]) > 0)))
+        bad += int(np.sum(~(doubled_areas(before) > 0)))
+        bad += int(np.sum(~(doubled_areas(after[survive]) > 0)))
     return bad
 
 
