@@ -68,9 +68,10 @@ class ManifoldReport:
     missing (on the ``"maps"`` route the straight triangles between the corners' images, which
     the remesh does not use: the map's image of a face is bent, and on strongly distorted
     parts the straight triangle between its corners turns over: 0-86 of 5-12k faces on the
-    closed shared meshes at 100 base faces, session 25, where the map has none); ``misplaced`` input vertices whose place
-    in the base domain (``param.vertex_face``, ``param.vertex_bary``) is outside its base
-    triangle or pulls back more than ``1e-9`` of the diagonal away from the vertex;
+    closed shared meshes at 100 base faces, session 25, where the map has none);
+    ``misplaced`` input vertices whose place in the base domain (``param.vertex_face``,
+    ``param.vertex_bary``) is outside its base triangle or pulls back more than ``1e-9`` of
+    the diagonal away from the vertex;
     ``folded`` remesh faces whose normal points away from the nearest input face's (a fold of
     the straight dyadic triangles, which the distances barely see: found on needle base
     triangles of a marching-cubes double torus, 34-48 of 25,600 faces at level 4, session 22);
@@ -142,8 +143,9 @@ def map_pieces_turned_over(history) -> int:
 def misplaced_vertices(param, tol: float = 1e-9) -> int:
     """How many input vertices have a place in the base domain (``param.vertex_face``,
     ``param.vertex_bary``) outside their base triangle (a negative or non-finite barycentric
-    coordinate, beyond rounding) or, on the ``"maps"`` route, one that pulls back (the remesh's exact inverse)
-    more than ``tol`` of the bounding-box diagonal away from the vertex."""
+    coordinate, beyond rounding) or, on the ``"maps"`` route, one that pulls back (the
+    remesh's exact inverse) more than ``tol`` of the bounding-box diagonal away from the
+    vertex."""
     b = np.asarray(param.vertex_bary, np.float64)
     off = ~np.all(np.isfinite(b) & (b >= -1e-12), axis=1)
     history = getattr(param.structure, "history", None)
