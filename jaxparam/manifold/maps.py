@@ -548,7 +548,8 @@ def decimate_caps(V: np.ndarray, F: np.ndarray, base_faces: int, caps, *, verbos
                 if stall >= 0:                     # -1: stalled before, hubs shared since
                     slow = (2 * chosen.size < STALL_SHARE * run.faces_left
                             and run.faces_left > STALL_FAR * base_faces)
-                    mb[6] = -1 if slow and stall + 1 >= STALL_LEVELS else (stall + 1 if slow else 0)
+                    stall = stall + 1 if slow else 0
+                    mb[6] = -1 if stall >= STALL_LEVELS else stall
                 picks.setdefault(chosen.tobytes(), (chosen, []))[1].append(mb)
             groups = list(picks.values())
             if not groups:                         # every one of them failed

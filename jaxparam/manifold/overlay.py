@@ -154,4 +154,3 @@ def _drawn_in(F, owner, vertex_face, vertex_bary, U):
         found, C = U.get(region, vertex_face[v])
         uv[:, c] = np.where(found[:, None], np.einsum("kc,kcd->kd", vertex_bary[v], C), np.nan)
     return region, uv
-

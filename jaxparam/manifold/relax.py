@@ -259,6 +259,12 @@ def around_a_vertex(D: BaseDomain, tri: np.ndarray, r: np.ndarray, b: np.ndarray
     return out & (best >= 3)
 
 
+def _moved(r1: np.ndarray, b1: np.ndarray, r: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(n,)``: the samples whose base face or coordinates differ between ``(r1, b1)`` and
+    ``(r, b)``."""
+    return (r1 != r) | np.any(b1 != b, axis=1)
+
+
 def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: np.ndarray,
                   b: np.ndarray, *, iterations: int = ITERATIONS, step: float = STEP,
                   curvature: float = CURVATURE_WEIGHT):
@@ -355,7 +361,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
         # none does (an undone move can turn over a triangle its neighbour's move left
         # standing; only the triangles and edges at the samples just changed are measured
         # again).  Stopping after a few passes left turned-over triangles behind.
-        changed = (r1 != r) | (b1[:, 0] != b[:, 0]) | (b1[:, 1] != b[:, 1]) | (b1[:, 2] != b[:, 2])
+        changed = _moved(r1, b1, r, b)
         while changed.any():
             fs = np.flatnonzero(changed[faces].any(1))
             es = np.flatnonzero(changed[i] | changed[j])
@@ -365,7 +371,7 @@ def relax_samples(D: BaseDomain, lift, faces: np.ndarray, edges: np.ndarray, r: 
             back[faces[bad_f].ravel()] = True
             back[i[bad_e]] = True
             back[j[bad_e]] = True
-            back &= (r1 != r) | (b1[:, 0] != b[:, 0]) | (b1[:, 1] != b[:, 1]) | (b1[:, 2] != b[:, 2])
+            back &= _moved(r1, b1, r, b)
             r1[back], b1[back] = r[back], b[back]
             changed = back
         r, b = r1, b1
@@ -403,4 +409,3 @@ def estimated_distance(V: np.ndarray, F: np.ndarray, sharp: np.ndarray, X: np.nd
     Q = np.concatenate([0.5 * (X[e[:, 0]] + X[e[:, 1]]), X[f].mean(1), foot])
     d_out = point_triangle_distance(Q, V, F)[0]
     return float(max(d_in.max(initial=0.0), d_out.max(initial=0.0)))
-
