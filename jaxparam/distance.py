@@ -9,6 +9,9 @@ Hausdorff and RMS distances both ways, relative to the bounding-box diagonal.
   face and the closest point; candidates come from a k-d tree of the face centroids and are
   proved complete: a point whose best distance exceeds a lower bound for the faces not tried
   searches an AABB tree (:class:`jaxparam.aabb_tree.AABBTree`) for every face box within it;
+  with the optional ``point-cloud-utils`` package (the ``fast`` extra) the nearest faces come
+  from its compiled AABB tree instead (8-16x faster, the same distances to rounding), and the
+  closest points from :func:`closest_points_on_triangles` as before;
 - :func:`sample_surface` — area-weighted random points on a mesh (fixed seed);
 - :func:`surface_distance` — :class:`SurfaceDistance`, both ways.
 
@@ -22,7 +25,7 @@ import numpy as np
 
 from .aabb_tree import AABBTree
 
-__all__ = ["closest_points_on_triangles", "point_triangle_distance", "sample_surface", "face_grid_points", "grid_barycentric",
+__all__ = ["closest_points_on_triangles", "point_triangle_distance", "compiled_nearest_faces", "sample_surface", "face_grid_points", "grid_barycentric",
            "surface_distance", "SurfaceDistance", "bounding_diagonal"]
 
 
@@ -114,12 +117,32 @@ def _best_of(P, V, F, rows, cand):
 _CHUNK = 1 << 16
 
 
-def point_triangle_distance(P, V, F, *, k: int = 8):
+def compiled_nearest_faces(P, V, F) -> np.ndarray | None:
+    """The nearest face ``(p,)`` of each point ``P (p, 3)`` on the mesh ``(V (n, 3), F (m,
+    3))`` from ``point-cloud-utils``' compiled AABB tree (libigl's, in double precision), or
+    ``None`` when that optional package is not installed.  Only the face is taken: its
+    barycentric coordinates are NaN on a degenerate face, and where two faces are equally
+    near it may pick the other one."""
+    try:
+        import point_cloud_utils as pcu
+    except ImportError:
+        return None
+    _, face, _ = pcu.closest_points_on_mesh(np.ascontiguousarray(P, np.float64),
+                                            np.ascontiguousarray(V, np.float64),
+                                            np.ascontiguousarray(F, np.int64))
+    return np.atleast_1d(np.asarray(face, np.int64))
+
+
+def point_triangle_distance(P, V, F, *, k: int = 8, compiled: bool = True):
     """Exact distance from each point to a triangle mesh.
 
     **Arguments:** ``P: (p, 3)`` query points; ``V: (n, 3)``, ``F: (m, 3)`` the mesh; ``k``
     the number of nearest face centroids tried first (a tuning knob: the result is exact for
-    any ``k``).
+    any ``k``); ``compiled``: take the nearest faces from ``point-cloud-utils`` when it is
+    installed (:func:`compiled_nearest_faces`; the ``fast`` extra), else (or with ``False``)
+    from numpy's search below.  Both give the same distances to rounding (within 1e-15 of
+    the diagonal in ``tests/test_distance.py``); where two faces are equally near, the face
+    returned may differ.
 
     **Returns** ``(d, face, closest)``: ``d: (p,)`` distances (units of ``V``), ``face: (p,)``
     the nearest face, ``closest: (p, 3)`` the closest point on it.
@@ -130,6 +153,11 @@ def point_triangle_distance(P, V, F, *, k: int = 8):
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     m = len(F)
+    face = compiled_nearest_faces(P, V, F) if compiled and len(P) and m else None
+    if face is not None:
+        tri = F[face]
+        q = closest_points_on_triangles(P, V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]])
+        return np.linalg.norm(q - P, axis=1), face, q
     corners = V[F]                                             # (m, 3, 3)
     centroid = corners.mean(axis=1)
     reach = np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)

@@ -6,7 +6,8 @@ import trimesh
 import jaxparam as jp
 
 from jaxparam.distance import (
-    bounding_diagonal, closest_points_on_triangles, face_grid_points, point_triangle_distance,
+    bounding_diagonal, closest_points_on_triangles, compiled_nearest_faces, face_grid_points,
+    point_triangle_distance,
     sample_surface,
     surface_distance,
 )
@@ -26,8 +27,8 @@ def test_exact_against_brute_force_for_any_k():
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
     P = rng.normal(size=(400, 3)) * 1.5
     oracle = _brute(P, V, F)
-    for k in (1, 3, 8, len(F)):
-        d, face, q = point_triangle_distance(P, V, F, k=k)
+    for k, compiled in ((1, False), (3, False), (8, False), (len(F), False), (8, True)):
+        d, face, q = point_triangle_distance(P, V, F, k=k, compiled=compiled)
         np.testing.assert_allclose(d, oracle, atol=1e-12)
         np.testing.assert_allclose(np.linalg.norm(q - P, axis=1), d, atol=1e-12)
 
@@ -49,9 +50,10 @@ def test_slivers_are_exact_and_searched_through_their_boxes():
         lo, hi = V.min(0), V.max(0)
         P = lo - 0.1 * (hi - lo) + 1.2 * (hi - lo) * rng.random((500, 3))
         oracle = _brute(P, V, F)
-        d, face, q = point_triangle_distance(P, V, F)
-        np.testing.assert_allclose(d, oracle, atol=1e-12 * np.ptp(V))
-        np.testing.assert_allclose(np.linalg.norm(q - P, axis=1), d, atol=1e-12 * np.ptp(V))
+        for compiled in (False, True):
+            d, face, q = point_triangle_distance(P, V, F, compiled=compiled)
+            np.testing.assert_allclose(d, oracle, atol=1e-12 * np.ptp(V))
+            np.testing.assert_allclose(np.linalg.norm(q - P, axis=1), d, atol=1e-12 * np.ptp(V))
         # the tree's search: every face nearer than the bound is among the pairs it returns
         tree = AABBTree(V, F, leaf=4)
         bound = 1.5 * oracle
@@ -63,6 +65,28 @@ def test_slivers_are_exact_and_searched_through_their_boxes():
         want = set(zip(near[0][dist <= bound[near[0]]].tolist(), near[1][dist <= bound[near[0]]].tolist()))
         assert want <= set(zip(rows.tolist(), cand.tolist()))
         assert rows.size < 0.5 * len(P) * len(F)          # and it is a search, not all pairs
+
+
+def test_compiled_nearest_faces_give_numpys_distances_on_degenerate_faces():
+    # the optional point-cloud-utils search (the fast extra) on a soup with repeated corners,
+    # a collinear face and a one-point face (its barycentric coordinates there are NaN: only
+    # its face is taken), a single point and no point at all
+    pytest.importorskip("point_cloud_utils", reason="the fast extra is not installed")
+    rng = np.random.default_rng(26)
+    V = rng.normal(size=(30, 3))
+    F = rng.integers(0, 30, (60, 3))
+    F[:5, 1] = F[:5, 0]
+    V[29] = 0.5 * (V[27] + V[28])
+    F[5], F[6] = [27, 28, 29], [3, 3, 3]
+    P = rng.normal(size=(3000, 3)) * 2
+    d0, _, _ = point_triangle_distance(P, V, F, compiled=False)
+    d1, face, q = point_triangle_distance(P, V, F)
+    assert np.isfinite(q).all()
+    np.testing.assert_allclose(d1, d0, rtol=0, atol=1e-15 * bounding_diagonal(V))
+    np.testing.assert_allclose(np.linalg.norm(q - P, axis=1), d1, atol=1e-14)
+    np.testing.assert_allclose(_brute(P[:200], V, F), d1[:200], atol=1e-14)
+    assert compiled_nearest_faces(P[:1], V, F).shape == (1,)
+    assert point_triangle_distance(P[:0], V, F)[0].shape == (0,)
 
 
 def test_closest_point_is_never_beaten_by_samples_of_the_triangle():
