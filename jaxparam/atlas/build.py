@@ -5,6 +5,8 @@ import time
 
 import jax
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from .. import energies as en_mod
 from ..errors import MeshError, SolverError
@@ -17,6 +19,7 @@ from . import compact as cp
 from . import flatten as fl
 from . import lscm
 from . import merge as mg
+from . import notches
 from .pack import pack_charts
 from .result import Atlas, atlas_stats
 
@@ -85,6 +88,38 @@ def _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters, *, max_new,
     corner_uv[todo[keep]] = uv[cm.mesh.faces[keep]]
     made = int(np.unique(chart).size) - k0
     return ch.relabel(chart), corner_uv, made
+
+
+def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspect):
+    """Ears moved into their neighbours' notches (:func:`~jaxparam.atlas.notches.fill_notches`),
+    then every chart a move changed minimized again from there, in one problem, so that each
+    chart stays its own free-boundary optimum (what :func:`~jaxparam.atlas.atlas_uv`
+    re-solves).  The charts joined by moves go back as they were, moves and maps, wherever
+    one of them then flips, crosses itself or passes ``max_aspect``.
+    **Returns:** ``(chart, corner_uv)``, labels ``0..c-1``."""
+    new, cuv, moved = notches.fill_notches(V, F, nbr, chart, corner_uv, max_aspect=max_aspect)
+    if not moved:
+        return chart, corner_uv
+    changed = np.flatnonzero(new != chart)
+    k = int(chart.max()) + 1
+    # charts joined by a move (donor and receiver) stand or fall together
+    link = sp.coo_matrix((np.ones(changed.size), (chart[changed], new[changed])), shape=(k, k))
+    group = connected_components(link, directed=False)[1]
+    touched = np.unique(np.r_[chart[changed], new[changed]])
+    todo = np.flatnonzero(np.isin(new, touched))
+    labels, sub = np.unique(new[todo], return_inverse=True)
+    cm = fl.chart_mesh(V, F[todo], sub)
+    uv0 = np.zeros((cm.mesh.n_vertices, 2))
+    uv0[cm.mesh.faces.reshape(-1)] = cuv[todo].reshape(-1, 2)
+    uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters)
+    q = fl.chart_quality(cm, uv)
+    bad = labels[(q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > max_aspect)]
+    keep = ~np.isin(group[new[todo]], group[bad])
+    out_chart, out_uv = chart.copy(), corner_uv.copy()
+    back = np.isin(group[chart], group[bad])        # faces of the charts that go back
+    out_chart[~back] = new[~back]
+    out_uv[todo[keep]] = uv[cm.mesh.faces[keep]]
+    return ch.relabel(out_chart), out_uv
 
 
 #: The most charts :func:`atlas` compacts.  Above, the many small charts of a noisy mesh
@@ -272,6 +307,9 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 cone=float(post_merge_cone), budget=float(post_merge_budget),
                 max_aspect=float(max_aspect), max_share=float(post_merge_share))
             mark("merge")
+        nbr = ch.face_neighbours(t)
+        chart, corner_uv = _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters,
+                                           float(max_aspect))
         laid = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
         mark("pack")
         if compact > 0:
@@ -282,6 +320,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                                                     max_iters, max_new=int(compact * k),
                                                     accept=float(compact_accept))
             if made:
+                chart2, corner_uv2 = _notches_filled(V, F, nbr, chart2, corner_uv2, en, solver,
+                                                     max_iters, float(max_aspect))
                 try:
                     laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size),
                                     int(margin_texels))
