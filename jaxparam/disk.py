@@ -14,7 +14,7 @@ from . import topology as topo
 from .errors import TopologyError, first_few
 from .mesh import TriMesh
 
-__all__ = ["disk_check", "fill_holes"]
+__all__ = ["disk_check", "fill_holes", "unstitched"]
 
 
 def disk_check(mesh: TriMesh, where: str) -> None:
@@ -24,7 +24,7 @@ def disk_check(mesh: TriMesh, where: str) -> None:
         sizes = np.bincount(t.components[t.components >= 0])
         raise TopologyError(
             f"{where}: the mesh has {t.n_components} connected components (vertex counts "
-            f"{first_few(sizes.tolist())}); {_unstitched(mesh) or ''}parameterize each on its "
+            f"{first_few(sizes.tolist())}); {_or(unstitched(mesh))}parameterize each on its "
             "own (e.g. trimesh's split) or keep the largest; for texture coordinates of the "
             "whole mesh, make a UV atlas (jp.atlas, jaxparam atlas).")
     if t.is_closed:
@@ -40,7 +40,11 @@ def disk_check(mesh: TriMesh, where: str) -> None:
             "with jp.atlas (jaxparam atlas).")
 
 
-def _unstitched(mesh: TriMesh) -> str | None:
+def _or(remedy: str | None) -> str:
+    return f"{remedy}, or " if remedy else ""
+
+
+def unstitched(mesh: TriMesh) -> str | None:
     """A sentence naming coincident vertices of different components (faces that meet but are
     not stitched, e.g. a triangle soup), with the remedy; None when there are none or the
     positions are traced."""
@@ -58,7 +62,7 @@ def _unstitched(mesh: TriMesh) -> str | None:
     return (f"vertices {a} and {b} coincide but lie in different components ({split.size} such "
             "copies in all): the faces are not stitched (a triangle soup, as STL exporters write); "
             "merge coincident vertices first (trimesh.Trimesh(V, F) does, with its default "
-            "process=True), or ")
+            "process=True)")
 
 
 def fill_holes(mesh: TriMesh) -> tuple[TriMesh, int]:

@@ -9,7 +9,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .. import energies as en_mod
-from ..errors import MeshError, SolverError
+from ..disk import unstitched
+from ..errors import MeshError, SolverError, TopologyError
 from ..io import as_mesh
 from ..mesh import TriMesh
 from ..clock import StageClock
@@ -220,6 +221,11 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         raise MeshError("atlas: the vertices are JAX tracers; the charts and the packing are "
                         "discrete choices made on concrete positions. Build the atlas from concrete "
                         "vertices, then differentiate jp.atlas_uv(vertices, atlas).")
+    soup = unstitched(mesh) if mesh.topology.n_components > 0.5 * mesh.topology.n_faces else None
+    if soup:
+        # one chart per triangle, and a packing of thousands of charts (a 1,653-triangle soup
+        # took 177 s): refused, as flatten refuses it
+        raise TopologyError(f"atlas: {soup}; unstitched, every triangle would be a chart of its own.")
     if int(texture_size) < 8:
         raise MeshError(f"atlas: texture_size must be at least 8 texels, got {texture_size}.")
     if not 0 <= 2 * int(margin_texels) < int(texture_size):

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..disk import unstitched
 from ..errors import MeshError, SolverError
 from ..io import as_mesh
 from ..mesh import TriMesh
@@ -96,7 +97,8 @@ def manifold_map_each(mesh: TriMesh, base_faces=100, *, method: str = "maps",
     mesh = as_mesh(mesh, "manifold_map_each")
     t = mesh.topology
     unused = np.flatnonzero(~t.referenced)
-    if unused.size:
+    soup = unstitched(mesh) if t.n_components > 1 else None
+    if unused.size or soup:
         check_closed_manifold(mesh, where="manifold_map_each")     # raises, naming them
     parts = split_components(mesh)
     counts = _counts(base_faces, parts)

@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..disk import unstitched
 from ..distance import point_triangle_distance, surface_distance
 from ..errors import MeshError, TopologyError, first_few
 from ..triangles import doubled_areas
@@ -28,6 +29,10 @@ def check_closed_manifold(mesh, where: str = "manifold_map") -> None:
     """Raise :class:`~jaxparam.errors.TopologyError` (a :class:`MeshError`) naming the place
     when ``mesh`` is not one closed, oriented 2-manifold without unused vertices."""
     t = mesh.topology
+    soup = unstitched(mesh) if t.n_components > 1 else None
+    if soup:
+        # a triangle soup (an STL, an unwelded export) reads as open pieces: say why
+        raise TopologyError(f"{where}: {soup}.")
     if not t.is_closed:
         loops = t.boundary_loops
         first = loops[0]
