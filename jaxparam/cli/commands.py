@@ -347,14 +347,31 @@ def cmd_manifold(args) -> int:
     rep = {"vertices": out.n_vertices, "faces": out.n_faces, "genus": int(t.genus),
            "base_vertices": base.n_vertices, "base_faces": base.n_faces, "levels": args.levels,
            "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
-           "work_vertices": param.mesh.n_vertices, "seconds": clock}
+           "work_vertices": param.mesh.n_vertices, "seconds": clock,
+           "folded": _folded(semi, mesh)}
     if getattr(args, "fidelity", False):
         rep["fidelity"] = fidelity(param, semi, mesh).as_dict()
         clock("fidelity")
     return finish(args, out, None, report=rep, plot=drawing("plot_remesh", semi),
                   line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, genus "
                        f"{t.genus}, subdivision connectivity of order {args.levels} over "
-                       f"{base.n_faces} base faces")
+                       f"{base.n_faces} base faces{_folded_note(rep['folded'])}")
+
+
+def _folded(semi, mesh) -> int:
+    """Remesh faces facing against the input faces their corners lie on
+    (:func:`jaxparam.manifold.report.folded_faces`): a fold the distances do not show."""
+    from ..manifold.report import folded_faces
+
+    return folded_faces(np.asarray(semi.mesh.vertices, np.float64), np.asarray(semi.mesh.faces),
+                        np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces))
+
+
+def _folded_note(folded) -> str:
+    """The success line's word on folded remesh faces (nothing when there are none)."""
+    n = int(np.sum(folded))
+    return (f"; {n} folded faces (facing against the input faces their corners lie on; "
+            "--fidelity gives the distances too)") if n else ""
 
 
 def _manifold_components(args, mesh, clock) -> int:
@@ -384,6 +401,9 @@ def _manifold_components(args, mesh, clock) -> int:
             sub = TriMesh(np.asarray(mesh.vertices)[part.vertices],
                           np.searchsorted(part.vertices, np.asarray(mesh.faces)[part.faces]))
             row["fidelity"] = fidelity(part.param, semi, sub).as_dict()
+        row["folded"] = _folded(semi, TriMesh(np.asarray(mesh.vertices)[part.vertices],
+                                              np.searchsorted(part.vertices,
+                                                              np.asarray(mesh.faces)[part.faces])))
         rows.append(row)
     if getattr(args, "fidelity", False):
         clock("fidelity")
@@ -395,4 +415,5 @@ def _manifold_components(args, mesh, clock) -> int:
                   line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, "
                        f"{len(parts)} components of genus {', '.join(str(r['genus']) for r in rows)}, "
                        f"subdivision connectivity of order {args.levels} over "
-                       f"{', '.join(str(r['base_faces']) for r in rows)} base faces")
+                       f"{', '.join(str(r['base_faces']) for r in rows)} base faces"
+                       f"{_folded_note([r['folded'] for r in rows])}")
