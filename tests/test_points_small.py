@@ -248,3 +248,23 @@ def test_reconstruction_options_out_of_range_are_refused_before_any_work(option,
     if option == "gap":
         with pytest.raises(PointCloudError, match=r"meshless_map: " + match):
             jp.meshless_map(P, gap=value)
+
+
+@pytest.mark.parametrize("make", ["circle", "helix"])
+def test_points_along_a_curve_are_refused_as_one_dimensional(make):
+    # the held-out sweep (session 26): a circle of 300 points gave exit 0 with "4 used, 2
+    # faces"; a random line with k = 30, 692 faces of total area 1e-8 and numpy's warnings
+    rng = np.random.default_rng(26)
+    if make == "circle":
+        a = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+        P = np.c_[np.cos(a), np.sin(a), 0 * a]
+    else:
+        t = rng.random(2000) * 20
+        P = np.c_[np.cos(t), np.sin(t), 0.1 * t]
+    for call in (lambda: jp.meshless_map(P), lambda: jp.points.reconstruct_surface(P)):
+        with pytest.raises(jp.PointCloudError, match=r"neighbourhoods are one-dimensional .*raise k"):
+            call()
+    # a band around the circle (1 % noise) is a thin surface, not a curve
+    from jaxparam.points.meshless import neighbourhood_spread
+
+    assert neighbourhood_spread(P + rng.normal(0, 0.01, P.shape), 10) > 0.1

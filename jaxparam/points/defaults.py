@@ -98,3 +98,12 @@ CHORD_TOL = 1e-9
 
 #: Most times the map is solved again with such points put on the boundary.
 CHORD_ROUNDS = 4
+
+#: The least median spread of the points' neighbourhoods (second over first singular value of
+#: each one's k nearest neighbours, :func:`~jaxparam.points.meshless.neighbourhood_spread`)
+#: that a surface sample has.  Points along a curve were mapped with exit 0 to a few
+#: zero-area faces (the held-out sweep, session 26).  With k = 10: a circle of 300 points
+#: 0.029, a helix of 2,000 random points 0.013; the same circle with 1 % noise 0.165 (a band);
+#: camelhead.xyz 0.80, bump-domain-half.xyz 0.75, a uniform planar sample 0.70, a sphere's
+#: noisy vertices 0.81.
+MIN_SPREAD = 0.1

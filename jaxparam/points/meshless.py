@@ -17,7 +17,7 @@ from .. import weights as wts
 from ..options import choose, is_integer, is_number
 from ..errors import ArgumentTypeError, PointCloudError, first_few
 from .boundary import detect_boundary
-from .defaults import GAP, K, MAX_SLOPE
+from .defaults import GAP, K, MAX_SLOPE, MIN_SPREAD
 from .graph import PointGraph, morton_keys, point_graph
 
 __all__ = ["WEIGHTS", "check_points", "check_map_options", "check_boundary_indices",
@@ -115,8 +115,29 @@ def check_points(points, *, k: int = K, merge_duplicates: bool = False, return_i
         what = "coincident" if s[0] == 0 else "collinear"
         raise PointCloudError(f"meshless_map: the points are {what}; a surface needs points "
                               "spread in two directions.")
+    spread = neighbourhood_spread(P, k)
+    if spread < MIN_SPREAD:
+        raise PointCloudError(
+            f"meshless_map: the points' neighbourhoods are one-dimensional (median spread across "
+            f"/ along the {k} nearest neighbours {spread:.3f}, below {MIN_SPREAD:g}): the points "
+            "lie along a curve, or far more densely along lines than across them (scan lines); "
+            f"a surface needs neighbours in two directions: raise k (now {k}) or resample.")
     out = (P, kept, index) if return_index else (P, kept)
     return out + (perm,) if return_order else out
+
+
+def neighbourhood_spread(P: np.ndarray, k: int, *, sample: int = 2000) -> float:
+    """The median, over up to ``sample`` points of ``P (N, 3)`` (a fixed stride), of the
+    second singular value over the first of each one's ``k`` nearest neighbours (centred): about
+    0.5-1 on a surface sample, near 0 where the neighbours lie on a line."""
+    from scipy.spatial import cKDTree
+
+    rows = np.arange(0, P.shape[0], max(1, P.shape[0] // sample))
+    kk = int(min(max(k, 3), P.shape[0] - 1))
+    _, nb = cKDTree(P).query(P[rows], k=kk + 1)
+    Q = P[nb] - P[nb].mean(1, keepdims=True)
+    s = np.linalg.svd(Q, compute_uv=False)
+    return float(np.median(s[:, 1] / np.maximum(s[:, 0], 1e-300)))
 
 
 def check_gap(where: str, gap) -> None:
