@@ -130,6 +130,25 @@ def test_per_corner_uvs_in_gltf_split_vertices_at_seams(tmp_path, mesh_uv):
     close(back.uv[back.faces], tex[T], ".glb")
 
 
+@pytest.mark.parametrize("ext", [".glb", ".gltf"])
+@pytest.mark.parametrize("offset", [0.0, 1e6, 1e8])
+def test_gltf_far_from_the_origin_keeps_float32_precision_of_the_mesh_size(tmp_path, mesh_uv, ext, offset):
+    # float32 positions of camelhead moved by 1e6 kept 420 distinct positions of 11,381 (the
+    # held-out sweep, session 26): a far mesh is written about its centre, the centre in the
+    # node's transform, and read back through it, corners and seams as written
+    mesh, _ = mesh_uv
+    tex, T = seamed(mesh)
+    V = np.asarray(mesh.vertices, np.float64) + offset
+    p = tmp_path / f"far{ext}"
+    jp.save(p, jp.TriMesh(V, mesh.faces), tex, uv_faces=T)
+    back = jp.load(p)
+    source, F2, uv2 = io.split_seams(mesh.faces, tex, T)
+    np.testing.assert_array_equal(back.faces, F2)
+    size = float(np.ptp(V, axis=0).max())
+    assert np.abs(np.asarray(back.vertices) - V[source]).max() <= 1e-6 * size
+    close(back.uv, uv2, ext)
+
+
 def test_split_seams_keeps_a_seamless_mesh_as_it_is(mesh_uv):
     mesh, uv = mesh_uv
     T = mesh.faces
