@@ -3,7 +3,12 @@
 Conventions of the scores (area-weighted means over the faces, using the 3D
 face areas; ``s1 >= s2`` the singular values of each face's Jacobian):
 
-- ``sym_dirichlet``: ``s1^2 + s2^2 + s1^-2 + s2^-2``; 4 for an isometry.
+- ``sym_dirichlet``: ``s1^2 + s2^2 + s1^-2 + s2^-2``; 4 for an isometry.  On the map's own
+  scale: a map onto the unit circle of a mesh 100 units across has tiny ``s`` and a huge
+  value, so compare maps of different scales by
+- ``sym_dirichlet_scaled``: the same with the UVs scaled so that their total area is the
+  surface's (what the atlas benchmarks call E_sd, times 2); invariant under a scaling of the
+  mesh or of the UVs.
 - ``mips``: ``s1/s2 + s2/s1`` (E2 of §6); 2 for a conformal map.
 - ``max_aspect``: the largest ``s1/s2``.
 - ``collapsed``: faces not flipped whose ``s1/s2`` exceeds ``tol.COLLAPSED_ASPECT`` (1e6):
@@ -65,6 +70,7 @@ class DistortionReport:
     area_distortion: float
     unreferenced_vertices: int
     theorem1: Theorem1 | None = None
+    sym_dirichlet_scaled: float = float("nan")
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -294,8 +300,10 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
             scale = a3.sum() / auv.sum()
             a = s1 * s2 * scale
             area_d = float(np.sum(w * (0.5 * (a + 1 / a) - 1)))
+            # the UVs scaled by sqrt(scale): s^2 -> scale s^2
+            sd_scaled = float(np.sum(w * (scale * (s1 ** 2 + s2 ** 2) + (s1 ** -2 + s2 ** -2) / scale)))
         else:
-            sd = mips = aspect = area_d = float("inf")
+            sd = mips = aspect = area_d = sd_scaled = float("inf")
     ang = 0.5 * mips - 1 if np.isfinite(mips) else float("inf")
     t = mesh.topology
     cert = theorem1(mesh, uv, weights=weights) if t.boundary_loops else None
@@ -306,4 +314,5 @@ def distortion(mesh, uv, *, weights=None) -> DistortionReport:
         collapsed=int(np.sum(host.collapsed_faces(fd))),
         boundary_overlaps=boundary_overlaps(mesh, uv),
         sym_dirichlet=sd, mips=mips, max_aspect=aspect, angle_distortion=float(ang),
-        area_distortion=area_d, unreferenced_vertices=int((~t.referenced).sum()), theorem1=cert)
+        area_distortion=area_d, unreferenced_vertices=int((~t.referenced).sum()), theorem1=cert,
+        sym_dirichlet_scaled=sd_scaled)

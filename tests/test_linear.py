@@ -228,3 +228,23 @@ def test_harmonic_weights_on_a_needle_name_the_face():
                                           r"'mean_value' or 'shape_preserving'"):
         jp.convex_map(mesh, weights="harmonic")
     assert np.all(np.isfinite(np.asarray(jp.convex_map(mesh, weights="mean_value"))))
+
+
+def test_scaled_symmetric_dirichlet_is_the_same_at_every_scale():
+    # the held-out sweep (session 26): the report's sym_dirichlet of a convex map was 8.92 for
+    # snail and 8.1e12 for snail x 1e6 (the circle's UVs against a larger surface);
+    # sym_dirichlet_scaled matches the UV area to the surface's first
+    m = jp.shapes.disk(6, seed=0, height=0.3)
+    V = np.asarray(m.vertices)
+    uv = np.asarray(jp.convex_map(m))
+    base = jp.distortion(m, uv)
+    for s in (1e-6, 1e6):
+        r = jp.distortion(jp.TriMesh(V * s, m.faces), uv)
+        assert r.sym_dirichlet_scaled == pytest.approx(base.sym_dirichlet_scaled, rel=1e-9)
+        assert r.sym_dirichlet != pytest.approx(base.sym_dirichlet, rel=0.5)
+    # and it is the plain value of the UVs scaled to the surface's area
+    q = jp.metrics.face_distortion(m, uv)
+    a3, auv = np.asarray(q["area3d"]), np.asarray(q["area_uv"])
+    scaled = jp.distortion(m, uv * np.sqrt(a3.sum() / auv.sum()))
+    assert scaled.sym_dirichlet == pytest.approx(base.sym_dirichlet_scaled, rel=1e-12)
+    assert base.sym_dirichlet_scaled >= 4.0

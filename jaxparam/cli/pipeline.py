@@ -90,7 +90,7 @@ def write_json(path, data) -> None:
 
 #: The metrics a report takes from :func:`jaxparam.distortion`, in order.
 REPORT_KEYS = ("vertices", "faces", "flips", "collapsed", "boundary_overlaps", "sym_dirichlet",
-               "mips", "max_aspect", "angle_distortion", "area_distortion",
+               "sym_dirichlet_scaled", "mips", "max_aspect", "angle_distortion", "area_distortion",
                "unreferenced_vertices", "theorem1")
 
 
