@@ -62,6 +62,10 @@ def check_output_format(path) -> str:
     return ext
 
 
+#: Extensions of point-set files (:func:`jaxparam.io.points.load_points`), which hold no faces.
+POINT_ONLY = (".npy", ".xyz", ".csv", ".pts", ".txt")
+
+
 def load(path, *, validate: bool = True) -> TriMesh:
     """Read a triangle mesh file, keeping the vertex order, with its UVs.
 
@@ -96,6 +100,11 @@ def load(path, *, validate: bool = True) -> TriMesh:
         V, F, uv, tex, T = read_ply(p)
     elif ext in (".glb", ".gltf"):
         V, F, uv = read_gltf(p)
+    elif ext in POINT_ONLY:
+        existing_file(p)
+        raise MeshFileError(f"{p}: a {ext} file holds points, not a mesh; parameterize points with "
+                            "jaxparam meshless (jp.meshless_map, jp.load_points), or pass a mesh "
+                            "(.obj, .off, .ply, .glb, .gltf, .stl).")
     else:
         V, F = _read_with_trimesh(p, ext)
     if tex is not None and uv is None:

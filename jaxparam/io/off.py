@@ -53,6 +53,8 @@ def read_off(path):
         raise MeshFileError(f"{path}, line {ln}: negative counts {nv} {nf}.")
     body = rest[1:]
     if len(body) < nv + nf:
+        body = _regrouped(ln, counts, body, nv, nf) or body
+    if len(body) < nv + nf:
         raise MeshFileError(f"{path}: the header promises {nv} vertices and {nf} faces but the file has "
                             f"only {len(body)} data lines; the file is truncated or the counts are wrong.")
     if len(body) > nv + nf:
@@ -85,6 +87,29 @@ def read_off(path):
     poly, pick = triangulate(V, polys, lambda i: f"{path}, line {lines[i]}")
     flat, start = polygon_corners(polys)
     return V, flat[start[poly][:, None] + pick]
+
+
+def _regrouped(counts_line: int, counts, body, nv: int, nf: int):
+    """The data of an OFF file that breaks its lines elsewhere (the format is whitespace
+    separated: a writer may put everything on one line), regrouped into one entry per vertex
+    (3 numbers) and per face (``k`` and ``k`` indices), each with the line it starts on; None
+    unless the tokens after the counts ``nv nf ne`` (on line ``counts_line``) are exactly that
+    many."""
+    stream = [(ln, t) for ln, toks in [(counts_line, counts[3:])] + body for t in toks]
+    out, i = [], 0
+    for j in range(nv + nf):
+        if i >= len(stream):
+            return None
+        if j < nv:
+            width = 3
+        else:
+            try:
+                width = 1 + int(stream[i][1])
+            except ValueError:
+                return None
+        out.append((stream[i][0], [t for _, t in stream[i:i + width]]))
+        i += width
+    return out if i == len(stream) else None
 
 
 def _looks_like_a_face(toks) -> bool:

@@ -25,7 +25,8 @@ def load_points(path) -> np.ndarray:
     """Read points: ``.xyz``/``.txt`` (x y z per line), ``.npy``, ``.ply``; ``(N, 3) float64``.
 
     Text files (any other extension, e.g. ``.csv``, is read as text too) take one point a
-    line, the first three numbers (separated by blanks or commas; ``#`` starts a comment);
+    line, the first three numbers (separated by blanks or commas; ``#`` starts a comment; a
+    first row of names, such as a CSV header ``x,y,z``, is skipped);
     ``.npy`` holds an ``(N, 3)`` array; a ``.ply`` file's vertices are read by :mod:`.ply`
     (ASCII or binary; faces ignored).  Units are the file's.
 
@@ -123,6 +124,14 @@ def _refuse_other_kinds(p, path, ext: str) -> None:
         return
 
 
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+        return True
+    except ValueError:
+        return False
+
+
 def _read_xyz(p, path) -> np.ndarray:
     """The ``(N, 3)`` points of a text file, one ``x y z`` a line; ``path`` as given, for messages."""
     rows = []
@@ -136,6 +145,8 @@ def _read_xyz(p, path) -> np.ndarray:
         try:
             rows.append([float(t) for t in parts[:3]])
         except ValueError:
+            if not rows and not any(_is_number(t) for t in parts):
+                continue               # a header row of column names ('x,y,z', as CSV writers do)
             raise MeshFileError(f"{path}, line {line_no}: cannot read numbers from {line!r}.") from None
     if not rows:
         raise MeshFileError(f"{path}: the file holds no points (no 'x y z' lines); is it the "
