@@ -52,3 +52,20 @@ def test_a_csv_header_row_is_skipped_and_a_bad_row_later_is_not(tmp_path):
     q.write_text("\n".join(",".join(f"{v:.17g}" for v in row) for row in P) + "\nx,y,z\n")
     with pytest.raises(MeshFileError, match=r"line 21: cannot read numbers"):
         jp.load_points(q)
+
+
+def test_info_describes_a_mesh_that_fails_the_checks(tmp_path, capsys):
+    # 'jaxparam info' printed no facts at all for a bowtie vertex or inconsistent winding
+    import json
+
+    bowtie = tmp_path / "bowtie.obj"
+    bowtie.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv -1 0 0\nv -1 -1 0\nf 1 2 3\nf 1 4 5\n")
+    assert main(["info", str(bowtie), "--json"]) == 3
+    info = json.loads(capsys.readouterr().out)
+    assert info["valid"] is False and info["vertices"] == 5 and info["faces"] == 2
+    assert "bowtie" in info["defect"] and info["zero_area_faces"] == 0
+    # a file that cannot be read is still an error, not facts
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nf 1 2 3\n")
+    assert main(["info", str(bad)]) == 3
+    assert capsys.readouterr().out == ""

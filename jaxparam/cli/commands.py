@@ -16,12 +16,12 @@ import numpy as np
 
 from .. import tol
 from ..clock import StageClock
-from ..errors import MeshFileError, PointCloudError
-from ..io import load, load_points, save
+from ..errors import MeshError, MeshFileError, PointCloudError
+from ..io import load, load_points, read_arrays, save
 from ..mesh import TriMesh
 from ..options import canonical, default_of
 from .arguments import flatten_options
-from .pipeline import EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
+from .pipeline import EXIT_INPUT, EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
 
 __all__ = ["begin", "finish", "drawing", "warn_unconverged", "cmd_info", "cmd_flatten", "cmd_meshless", "cmd_fit",
            "cmd_remesh", "cmd_compress", "cmd_manifold"]
@@ -122,19 +122,45 @@ def finish(args, mesh, uv, line: str, *, report: dict | None = None,
 
 
 def cmd_info(args) -> int:
-    """``jaxparam info MESH [--json]``: the topology facts of a mesh."""
-    mesh, clock = begin(args.mesh, compile_cache=False)
-    info = mesh.topology.summary()
+    """``jaxparam info MESH [--json]``: the topology facts of a mesh.  A mesh that fails the
+    checks (a bowtie vertex, inconsistent winding, a zero-area face, ...) still gets the facts
+    that need no valid topology, and the defect, with exit code 3."""
+    try:
+        mesh, clock = begin(args.mesh, compile_cache=False)
+        info = mesh.topology.summary()          # the checks run here, or when the mesh is made
+    except MeshFileError:
+        raise
+    except MeshError as exc:
+        return _info_of_invalid(args, exc)
     info["file"] = str(args.mesh)
     info["is_disk"] = bool(mesh.topology.is_disk)
     clock("summary")
     info["seconds"] = clock.total
+    _print_info(args, info)
+    return EXIT_OK
+
+
+def _print_info(args, info: dict) -> None:
     if args.json:
         print(json.dumps(clean(info), indent=2))
     else:
         for k, v in info.items():
             print(f"{k:24s} {v}")
-    return EXIT_OK
+
+
+def _info_of_invalid(args, exc) -> int:
+    """``jaxparam info`` of a mesh the checks refuse: counts, bounding box, degenerate faces
+    and unused vertices (no topology), then the defect; exit code 3."""
+    V, F = read_arrays(args.mesh)
+    area2 = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    used = np.zeros(V.shape[0], bool)
+    used[F.ravel()] = True
+    info = {"vertices": int(V.shape[0]), "faces": int(F.shape[0]),
+            "bounding_box": (V.max(0) - V.min(0)).tolist() if V.size else None,
+            "zero_area_faces": int(np.sum(~(area2 > 0))), "unused_vertices": int(np.sum(~used)),
+            "file": str(args.mesh), "valid": False, "defect": str(exc)}
+    _print_info(args, info)
+    return EXIT_INPUT
 
 
 def cmd_flatten(args) -> int:

@@ -30,7 +30,7 @@ from .obj import corner_to_vertex_uv, parse_obj, read_obj, write_obj
 from .off import read_off, write_off
 from .ply import read_ply, write_ply
 
-__all__ = ["read_obj", "read_off", "read_ply", "load", "save", "check_output_format",
+__all__ = ["read_obj", "read_off", "read_ply", "load", "read_arrays", "save", "check_output_format",
            "WRITE_FORMATS"]
 
 #: The extensions :func:`save` writes, and what each keeps.
@@ -85,6 +85,24 @@ def load(path, *, validate: bool = True) -> TriMesh:
 
         mesh = jp.load("camelhead.off")
     """
+    p, V, F, uv, tex, T = _read(path)
+    if tex is not None and uv is None:
+        uv = corner_to_vertex_uv(F, tex, T, V.shape[0])
+        if uv is not None:
+            tex = T = None
+    return TriMesh(V, F, uv=uv, validate=validate, name=p.stem, texcoords=tex, uv_faces=T)
+
+
+def read_arrays(path) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (n, 3) float64, faces (m, 3) int64)`` of a mesh file, read as :func:`load`
+    reads it but with no check of the mesh (``jaxparam info`` describes a mesh that fails
+    them); raises :class:`MeshFileError` for a file it cannot read."""
+    _, V, F, _, _, _ = _read(path)
+    return np.asarray(V, np.float64), np.asarray(F, np.int64)
+
+
+def _read(path):
+    """``(path, V, F, uv, texcoords, uv_faces)`` of a mesh file (see :func:`load`)."""
     p = file_path(path, "load", "; a mesh in memory needs no loading (jp.TriMesh(V, F), or "
                   "jp.io.from_trimesh for a trimesh.Trimesh)")
     ext = p.suffix.lower()
@@ -93,7 +111,7 @@ def load(path, *, validate: bool = True) -> TriMesh:
         V, F, tex, T, dropped = parse_obj(p)
         if dropped:
             warnings.warn(f"{path}: {dropped} of the faces have no vt indices, so the file's "
-                          "texture coordinates were not loaded (mesh.uv is None).", stacklevel=2)
+                          "texture coordinates were not loaded (mesh.uv is None).", stacklevel=3)
     elif ext == ".off":
         V, F = read_off(p)
     elif ext == ".ply":
@@ -107,11 +125,7 @@ def load(path, *, validate: bool = True) -> TriMesh:
                             "(.obj, .off, .ply, .glb, .gltf, .stl).")
     else:
         V, F = _read_with_trimesh(p, ext)
-    if tex is not None and uv is None:
-        uv = corner_to_vertex_uv(F, tex, T, V.shape[0])
-        if uv is not None:
-            tex = T = None
-    return TriMesh(V, F, uv=uv, validate=validate, name=p.stem, texcoords=tex, uv_faces=T)
+    return p, V, F, uv, tex, T
 
 
 def _read_with_trimesh(p: Path, ext: str):
