@@ -151,13 +151,15 @@ def _print_info(args, info: dict) -> None:
 def _info_of_invalid(args, exc) -> int:
     """``jaxparam info`` of a mesh the checks refuse: counts, bounding box, degenerate faces
     and unused vertices (no topology), then the defect; exit code 3."""
+    from ..host import face_areas
+
     V, F = read_arrays(args.mesh)
-    area2 = np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    area = face_areas(V, F)
     used = np.zeros(V.shape[0], bool)
     used[F.ravel()] = True
     info = {"vertices": int(V.shape[0]), "faces": int(F.shape[0]),
             "bounding_box": (V.max(0) - V.min(0)).tolist() if V.size else None,
-            "zero_area_faces": int(np.sum(~(area2 > 0))), "unused_vertices": int(np.sum(~used)),
+            "zero_area_faces": int(np.sum(~(area > 0))), "unused_vertices": int(np.sum(~used)),
             "file": str(args.mesh), "valid": False, "defect": str(exc)}
     _print_info(args, info)
     return EXIT_INPUT
@@ -423,13 +425,11 @@ def _manifold_components(args, mesh, clock) -> int:
                "faces": semi.mesh.n_faces, "genus": int(semi.mesh.topology.genus),
                "base_vertices": part.base.n_vertices, "base_faces": part.base.n_faces,
                "work_vertices": part.param.mesh.n_vertices}
+        sub = TriMesh(np.asarray(mesh.vertices)[part.vertices],
+                      np.searchsorted(part.vertices, np.asarray(mesh.faces)[part.faces]))
         if getattr(args, "fidelity", False):
-            sub = TriMesh(np.asarray(mesh.vertices)[part.vertices],
-                          np.searchsorted(part.vertices, np.asarray(mesh.faces)[part.faces]))
             row["fidelity"] = fidelity(part.param, semi, sub).as_dict()
-        row["folded"] = _folded(semi, TriMesh(np.asarray(mesh.vertices)[part.vertices],
-                                              np.searchsorted(part.vertices,
-                                                              np.asarray(mesh.faces)[part.faces])))
+        row["folded"] = _folded(semi, sub)
         rows.append(row)
     if getattr(args, "fidelity", False):
         clock("fidelity")
