@@ -257,7 +257,8 @@ def count_compiles(fn):
     return events.count("/jax/core/compile/backend_compile_duration")
 
 
-@pytest.mark.parametrize("solver", ["newton", "lbfgs"])
+# (L-BFGS's case, 14 s, with the slow tests since session 27; Newton's stays always on)
+@pytest.mark.parametrize("solver", ["newton", pytest.param("lbfgs", marks=pytest.mark.slow)])
 def test_equal_energies_share_compiled_code(mesh, start, solver):
     from jaxparam.optimize import problem
 

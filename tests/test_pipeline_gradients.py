@@ -127,6 +127,9 @@ def check(key, x, rtol):
     assert abs(s - s0) <= rtol * l1, (key, s, s0, abs(s - s0) / l1)
 
 
+# (20-30 s on a 2-core AMD EPYC: with the slow tests since session 27, when the always-on suite
+# took 877 s there; the gradient and jit tests of remesh and compress stay always on)
+@pytest.mark.slow
 def test_remesh_and_compress_values_are_unchanged():
     # Bitwise in practice (concrete UVs take the numpy path as before; the mask is the same
     # stable ranking); 1e-14 of the L1 norm leaves room for summation order only.
@@ -176,8 +179,11 @@ def generic(mesh, seed=7, size=0.01):
     return jnp.asarray(mesh.vertices) + size * np.random.default_rng(seed).normal(size=mesh.vertices.shape)
 
 
-# (the disk, 20 s, with the slow tests since session 20; the graph surface's 8 s stay)
-@pytest.mark.parametrize("name", [pytest.param("disk", marks=pytest.mark.slow), "graph"])
+# (the disk, 20 s, with the slow tests since session 20; the graph surface, 39 s cold on a
+# 2-core AMD EPYC, since session 27: test_remesh.py::test_remesh_is_differentiable_in_the_
+# vertex_positions stays always on)
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["disk", "graph"])
 def test_remesh_gradient_follows_the_sample_points_through_convex_map(name):
     mesh = jp.shapes.disk(5, seed=1, height=0.3) if name == "disk" else jp.shapes.graph_surface(8)
     F, V0 = mesh.faces, generic(mesh)
@@ -318,9 +324,12 @@ def _fit_fixture(name):
 
 
 # (the graph surface's default-knot case, 11 s, and Clough-Tocher's, 16 s, run with the slow
-# tests since session 20, when the always-on suite reached its 10 minutes; the disk's stay)
-@pytest.mark.parametrize("name", ["disk", pytest.param("graph", marks=pytest.mark.slow)])
-@pytest.mark.parametrize("knots", [None, 6])
+# tests since session 20, when the always-on suite reached its 10 minutes; the disk's stay,
+# its default knots' 30 s excepted since session 27: the disk with 6 knots stays always on)
+@pytest.mark.parametrize("name,knots", [pytest.param("disk", None, marks=pytest.mark.slow),
+                                        ("disk", 6),
+                                        pytest.param("graph", None, marks=pytest.mark.slow),
+                                        pytest.param("graph", 6, marks=pytest.mark.slow)])
 def test_spline_gradients(name, knots):
     mesh, X0, U0, Q, interior, rng = _fit_fixture(name)
     Qj = jnp.asarray(Q)
@@ -360,7 +369,10 @@ def exact_ct(U, X, q):
     return np.asarray(f(np.asarray(q))).reshape(-1, 3)
 
 
-@pytest.mark.parametrize("name", ["disk", pytest.param("graph", marks=pytest.mark.slow)])
+# (36 s cold on a 2-core AMD EPYC: with the slow tests since session 27; Clough-Tocher under
+# jit and its values against SciPy's stay always on)
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["disk", "graph"])
 def test_clough_tocher_gradients(name):
     mesh, X0, U0, Q, interior, rng = _fit_fixture(name)
     s0 = jp.fit_surface(X0, U0, kind="clough_tocher")

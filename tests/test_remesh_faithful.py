@@ -271,6 +271,7 @@ def test_the_default_map_samples_where_the_error_is(mesh):
     assert hausdorff(tuned) < 0.8 * hausdorff(plain)
 
 
+@pytest.mark.slow          # two minimizations to 200 iterations, 15 s (session 27)
 def test_the_default_map_minimizes_the_density_stretch(mesh):
     """The default map is solved as the plain stretch with per-face weights (closed-form
     Hessians): the same minimizer as jp.minimize of density_stretch, a lower energy than its

@@ -155,7 +155,10 @@ def test_grad_under_jit_and_vjp(symmetric, backend):
     assert abs(float(gv @ dv) - fd) <= 1e-6 * abs(fd)
 
 
-@pytest.mark.parametrize(("symmetric", "backend"), CASES, ids=CASE_IDS)
+# PARDISO's two cases (10-15 s each) with the slow tests since session 27; SciPy's stay on
+@pytest.mark.parametrize(("symmetric", "backend"), [
+    pytest.param(s, b, id=i, marks=pytest.mark.slow) if b == "pardiso" else pytest.param(s, b, id=i)
+    for (s, b), i in zip(CASES, CASE_IDS)])
 def test_second_derivatives_against_differences_of_the_gradient(symmetric, backend):
     P, v, _, rng = random_system(symmetric, seed=4)
     b = rng.standard_normal(N)
