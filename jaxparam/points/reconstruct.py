@@ -60,8 +60,10 @@ class Reconstruction:
       "peel_and_topology"}`` ("neighbours" includes the outlier test and the smoothing);
     - ``squeezed``: the share of the map's Delaunay triangles whose share of the parameter
       domain is below 1/1000 of their share of the 3D area (:mod:`~jaxparam.points.squeeze`);
-      above 0.2 a :class:`~jaxparam.points.squeeze.SqueezedMapWarning` says the points seem
-      to sample a closed surface (open scans measured 0-0.12, closed ones 0.30-0.99);
+      above 0.2 the points seem to sample a closed surface (open scans measured 0-0.12,
+      closed ones 0.30-0.99): a detected boundary's map is then refused
+      (:class:`PointCloudError`), the user's ``boundary_indices``' returned with a
+      :class:`~jaxparam.points.squeeze.SqueezedMapWarning`;
     - ``holes``: the holes of the mesh (its boundary loops less the outer one), opened where
       the scan has holes (``reconstruct_surface(..., holes=True)``, the default).
 
@@ -264,6 +266,10 @@ def _reconstruct(points, *, k, radius, symmetric, weights, boundary, spacing, ga
     F = delaunay(U)
     F = F[np.argsort(F.min(axis=1), kind="stable")]     # faces in the points' (Morton) order too
     squeezed = squeezed_share(F, P, U)
+    if squeezed > SQUEEZED_SHARE and user is None:
+        # A detected boundary that leaves most of the surface squeezed is no boundary: going on
+        # would drop thousands of points as "outliers" of bridging faces (session 27, camel_b).
+        raise PointCloudError(squeeze_message(squeezed, bnd.size, n_in, detected=True))
     if squeezed > SQUEEZED_SHARE:
         warnings.warn(squeeze_message(squeezed, bnd.size, n_in), SqueezedMapWarning, stacklevel=3)
     mark("delaunay")
