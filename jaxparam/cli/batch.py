@@ -55,7 +55,7 @@ from ..io import atomic_write, load, save
 from ..progress import progress, write
 from .arguments import add_flatten_options, flatten_options, subparser
 from .pipeline import (EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_SOLVER, EXIT_USAGE, clean,
-                       enable_compile_cache, failure, flatten_mesh)
+                       enable_compile_cache, failure, flatten_mesh, flip_warning)
 
 __all__ = ["MESH_EXTENSIONS", "SUMMARY", "find_mesh_files", "output_paths", "flatten_file",
            "run_batch", "exit_code", "cmd_batch", "add_parser"]
@@ -232,6 +232,8 @@ def run_batch(files, outputs, options: dict, *, workers: int = 1, engine: str = 
         if rec["status"] == "ok" and rec.get("converged") is False:
             state += (f" (warning: the minimization stopped after {rec.get('iterations')} "
                       "iterations without converging)")
+        if rec["status"] == "ok" and rec.get("flips"):
+            state += f" (warning: {flip_warning(rec)})"
         say(f"[{done[0]}/{len(jobs)}] {Path(rec['file']).name}: {state}")
 
     with bar:
@@ -295,6 +297,11 @@ def cmd_batch(args) -> int:
     atomic_write(out / SUMMARY, lambda f: f.writelines(json.dumps(r) + "\n" for r in records))
     ok = sum(r["status"] == "ok" for r in records)
     unconverged = sum(r["status"] == "ok" and r.get("converged") is False for r in records)
+    folded = [Path(r["file"]).name for r in records if r["status"] == "ok" and r.get("flips")]
+    if folded:
+        err(f"warning: {len(folded)} map(s) have flipped or degenerate UV triangles "
+            f"({', '.join(folded[:5])}{', ...' if len(folded) > 5 else ''}); their records count "
+            "them under \"flips\" and the lines above say why")
     if unconverged:
         err(f"warning: {unconverged} minimization(s) stopped without converging; their records "
             "say \"converged\": false (raise --max-iters or try another --solver)")

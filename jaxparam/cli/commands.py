@@ -21,7 +21,8 @@ from ..io import load, load_points, read_arrays, save
 from ..mesh import TriMesh
 from ..options import canonical, default_of
 from .arguments import flatten_options
-from .pipeline import EXIT_INPUT, EXIT_OK, clean, enable_compile_cache, flatten_mesh, report_dict, write_json
+from .pipeline import (EXIT_INPUT, EXIT_OK, clean, enable_compile_cache, flatten_mesh, flip_warning,
+                       report_dict, write_json)
 
 __all__ = ["begin", "finish", "drawing", "warn_unconverged", "cmd_info", "cmd_flatten", "cmd_meshless", "cmd_fit",
            "cmd_remesh", "cmd_compress", "cmd_manifold"]
@@ -67,20 +68,12 @@ def warn_unconverged(command: str, rep: dict, name: str = "") -> bool:
 
 def warn_flips(command: str, rep: dict) -> bool:
     """Print a warning on stderr when the report ``rep`` counts flipped or degenerate UV
-    triangles (``rep["flips"] > 0``), naming the dividing edges Theorem 1 blames; returns
-    whether it did."""
-    flips = rep.get("flips") or 0
-    if flips <= 0:
+    triangles (``rep["flips"] > 0``), with the cause and remedy of
+    :func:`~jaxparam.cli.pipeline.flip_warning`; returns whether it did."""
+    text = flip_warning(rep)
+    if text is None:
         return False
-    why = ""
-    edges = (rep.get("theorem1") or {}).get("dividing_edges_on_boundary") or []
-    if edges:
-        named = ", ".join(f"({int(a)}, {int(b)})" for a, b in edges[:5])
-        why = (f": the dividing edges {named} (interior edges with both ends on the boundary) "
-               "lie on one straight side of the boundary polygon, so their faces are flat; use "
-               "--boundary circle, or split those edges")
-    print(f"jaxparam {command}: warning: {flips} faces of the map are flipped or degenerate (zero "
-          f"area) in the UVs{why}", file=sys.stderr)
+    print(f"jaxparam {command}: warning: {text}", file=sys.stderr)
     return True
 
 
