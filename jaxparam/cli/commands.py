@@ -282,9 +282,10 @@ FIT_RESIDUAL_WARN = 0.02
 
 def cmd_remesh(args) -> int:
     """``jaxparam remesh MESH -o OUT.obj``: subdivision connectivity over a base domain."""
-    from ..remesh import area_aware_map, measure_errors, remesh
+    from ..remesh import area_aware_map, check_remesh_input, measure_errors, remesh
 
     mesh, clock = begin(args.mesh)
+    check_remesh_input(mesh, args.levels, base_faces=args.base_faces)   # before the map's work
     # the area-aware map (L2 stretch minimized inside the circle or the square); the square
     # took the plain convex map, 21 % of the diagonal off at level 4 where the circle's area-aware
     # map was at 0.6 % (a held-out sphere with one face removed, session 22)
