@@ -69,3 +69,15 @@ def test_info_describes_a_mesh_that_fails_the_checks(tmp_path, capsys):
     bad.write_text("v 0 0 0\nf 1 2 3\n")
     assert main(["info", str(bad)]) == 3
     assert capsys.readouterr().out == ""
+
+
+def test_info_counts_the_zero_area_faces_its_defect_names(tmp_path, capsys):
+    # a face 1e-14 of the size off a line: the check's relative test names it, and the count
+    # said 0 (session 27: an exact-zero test)
+    import json
+
+    p = tmp_path / "sliver.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 1e-14 0\nf 1 2 3\nf 1 4 2\n")
+    assert main(["info", str(p), "--json"]) == 3
+    info = json.loads(capsys.readouterr().out)
+    assert "zero area" in info["defect"] and info["zero_area_faces"] == 1
