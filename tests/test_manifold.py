@@ -207,3 +207,17 @@ def test_cli_manifold_counts_folded_faces_in_its_report_and_its_line(tmp_path, c
     monkeypatch.setattr(report, "folded_faces", lambda *a: 5)
     assert main(["manifold", str(src), "-o", str(out), "--base-faces", "24", "--levels", "1"]) == 0
     assert "; 5 folded faces (facing against the input" in capsys.readouterr().out
+
+
+def test_a_total_below_what_the_components_need_is_refused_before_any_work(monkeypatch):
+    # two spheres need 4 base faces each: a total of 4 gave 8 silently (session 27's sweep)
+    import importlib
+
+    comp = importlib.import_module("jaxparam.manifold.components")
+    monkeypatch.setattr(comp, "manifold_map", lambda *a, **k: pytest.fail("work started"))
+    s = jp.shapes.sphere(1)
+    two = jp.TriMesh(np.concatenate([np.asarray(s.vertices), np.asarray(s.vertices) + 3]),
+                     np.concatenate([s.faces, s.faces + s.n_vertices]))
+    with pytest.raises(jp.MeshError, match=r"base_faces = 6 is a total shared by the 2 components, "
+                                           r"which need at least 8 \(4, 4"):
+        comp.manifold_map_each(two, 6)

@@ -64,6 +64,14 @@ def split_components(mesh: TriMesh) -> list[tuple[np.ndarray, np.ndarray, TriMes
 def _counts(base_faces, parts) -> list[int]:
     """Base faces per component: a total split by the components' faces, or one count each."""
     if isinstance(base_faces, (int, np.integer)):
+        least = [fewest_faces(p[2].topology.genus) for p in parts]
+        if len(parts) > 1 and base_faces < sum(least):
+            # (each component's share was raised to its least, silently: 4 asked for two
+            # spheres gave 8; session 27)
+            raise MeshError(f"manifold_map_each: base_faces = {base_faces} is a total shared by the "
+                            f"{len(parts)} components, which need at least {sum(least)} "
+                            f"({', '.join(map(str, least))}, largest first, by genus); pass at "
+                            f"least {sum(least)}, or one count per component.")
         total = sum(p[2].n_faces for p in parts)
         return [min(max(2 * int(round(base_faces * p[2].n_faces / total / 2)), fewest_faces(p[2].topology.genus)),
                     p[2].n_faces - 2) for p in parts]
@@ -81,7 +89,8 @@ def manifold_map_each(mesh: TriMesh, base_faces=100, *, method: str = "maps",
     **Arguments:** ``mesh`` closed and oriented, of one or more components (each one a closed
     2-manifold of any genus); ``base_faces`` either the total base faces, shared by the
     components in proportion to their faces (each count rounded to an even number, at least
-    :func:`~jaxparam.manifold.fewest_faces` of the component's genus), or a sequence of one
+    :func:`~jaxparam.manifold.fewest_faces` of the component's genus; a total below the sum of
+    those is refused), or a sequence of one
     count per component, largest component first (as :func:`split_components` orders them);
     ``method`` and ``verbose`` as in :func:`~jaxparam.manifold.manifold_map`.
 
