@@ -206,7 +206,11 @@ def test_cli_manifold_counts_folded_faces_in_its_report_and_its_line(tmp_path, c
     capsys.readouterr()
     monkeypatch.setattr(report, "folded_faces", lambda *a: 5)
     assert main(["manifold", str(src), "-o", str(out), "--base-faces", "24", "--levels", "1"]) == 0
-    assert "; 5 folded faces (facing against the input" in capsys.readouterr().out
+    cap = capsys.readouterr()
+    assert "; 5 folded faces (facing against the input" in cap.out
+    # and a warning on stderr with the remedy (session 27: the line alone went unnoticed)
+    faces = json.loads(rep.read_text())["faces"]
+    assert f"warning: 5 of the remesh's {faces} faces" in cap.err and "more base faces" in cap.err
 
 
 def test_a_total_below_what_the_components_need_is_refused_before_any_work(monkeypatch):
