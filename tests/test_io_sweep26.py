@@ -81,3 +81,20 @@ def test_info_counts_the_zero_area_faces_its_defect_names(tmp_path, capsys):
     assert main(["info", str(p), "--json"]) == 3
     info = json.loads(capsys.readouterr().out)
     assert "zero area" in info["defect"] and info["zero_area_faces"] == 1
+
+
+def test_a_glb_warns_when_float32_turns_a_uv_sliver_over(tmp_path):
+    # glTF stores float32: a sliver far from the origin collapses there (session 27: a .glb
+    # of a meshless map had 2 such triangles, unannounced); .obj keeps float64 and says nothing
+    import warnings
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    uv = np.array([[1.0, 1.0], [1 + 1e-8, 1.0], [1.0, 1 + 1e-8], [1 + 1e-8, 1 + 1e-8]])
+    mesh = jp.TriMesh(V, F)
+    with pytest.warns(UserWarning, match=r"faces 0, 1 \(2 in all\) turn over or collapse .*float32"):
+        jp.save(tmp_path / "s.glb", mesh, uv)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jp.save(tmp_path / "s.obj", mesh, uv)
+        jp.save(tmp_path / "ok.glb", mesh, uv - 1.0)        # near the origin float32 keeps them

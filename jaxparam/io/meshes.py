@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import MeshError, MeshFileError, first_few
 from ..mesh import TriMesh
+from ..triangles import signed_area2
 from .files import atomic_write, existing_file, file_path
 from .gltf import gltf_bytes, read_gltf
 from .interop import as_mesh, split_seams, to_trimesh
@@ -186,6 +187,22 @@ def _uvs(mesh: TriMesh, uv, uv_faces):
     return uv, None, None
 
 
+def _warn_float32_flips(path, uv: np.ndarray, F: np.ndarray) -> None:
+    """Warn when UV triangles that are positive in float64 turn over or collapse once their
+    UVs are rounded to float32, which glTF stores (a meshless map's slivers, s1/s2 about 1e5,
+    came out of a .glb with 2 triangles of area -1e-12 that the .ply kept positive;
+    session 27)."""
+    uv = np.asarray(uv, np.float64)           # (nan UVs of unused vertices compare False)
+    before = signed_area2(uv, F)
+    after = signed_area2(uv.astype(np.float32).astype(np.float64), F)
+    bad = np.flatnonzero((before > 0) & ~(after > 0))
+    if bad.size:
+        warnings.warn(f"save: {path}: the UV triangles of faces {first_few(bad)} turn over or "
+                      "collapse when their UVs are rounded to float32, which glTF stores (they are "
+                      "slivers of the map); write .obj or .ply to keep the UVs in float64.",
+                      stacklevel=3)
+
+
 def save(path, mesh, uv=None, *, uv_faces=None, texture=None) -> None:
     """Write ``mesh`` with its UVs in the format ``path``'s extension names (table above).
 
@@ -238,6 +255,8 @@ def save(path, mesh, uv=None, *, uv_faces=None, texture=None) -> None:
         if tex is not None:
             source, F, uv = split_seams(F, tex, T)
             V = V[source]
+        if uv is not None:
+            _warn_float32_flips(path, uv, F)
         tm = to_trimesh(TriMesh(V, F, validate=False, name=mesh.name), uv, texture=texture)
         data = gltf_bytes(tm, binary=ext == ".glb")
         atomic_write(path, lambda f: f.write(data), mode="wb")
