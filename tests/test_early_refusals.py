@@ -58,3 +58,14 @@ def test_check_remesh_input_is_what_remesh_refuses():
     with pytest.raises(MeshError, match="base_faces or corners, not both"):
         remesh_module.check_remesh_input(jp.shapes.disk(4), 3, base_faces=5, corners=[0, 3, 6])
     remesh_module.check_remesh_input(jp.shapes.disk(4), 3)          # a disk passes
+
+
+@pytest.mark.parametrize("value", ["-3", "0", "2.5"])
+def test_max_iters_must_be_a_positive_integer_at_parse_time(tmp_path, capsys, value):
+    src = tmp_path / "m.off"
+    jp.save(src, jp.shapes.disk(3))
+    with pytest.raises(SystemExit) as exc:
+        main(["flatten", str(src), "-o", str(tmp_path / "f.obj"), "--energy", "mips",
+              "--max-iters", value])
+    assert exc.value.code == 2
+    assert f"--max-iters must be a positive integer, got '{value}'" in capsys.readouterr().err

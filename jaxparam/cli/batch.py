@@ -53,7 +53,7 @@ from typing import Callable
 from ..errors import MeshFileError
 from ..io import atomic_write, load, save
 from ..progress import progress, write
-from .arguments import add_flatten_options, flatten_options, subparser
+from .arguments import add_flatten_options, flatten_options, positive_int, subparser
 from .pipeline import (EXIT_INPUT, EXIT_INTERNAL, EXIT_OK, EXIT_SOLVER, EXIT_USAGE, clean,
                        enable_compile_cache, failure, flatten_mesh, flip_warning)
 
@@ -257,17 +257,6 @@ def exit_code(records) -> int:
     return EXIT_OK
 
 
-def _positive_int(text: str) -> int:
-    """argparse ``type=`` for ``--workers``: an integer of at least 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"--workers must be a positive integer, got {text!r}")
-    return value
-
-
 def cmd_batch(args) -> int:
     """``jaxparam batch FOLDER -o OUTFOLDER``: see the module docstring."""
     def err(msg):
@@ -320,7 +309,7 @@ def add_parser(sub) -> None:
     p.add_argument("folder")
     p.add_argument("-o", "--output", required=True, help="the output folder (created if needed)")
     add_flatten_options(p)
-    p.add_argument("--workers", type=_positive_int, default=1,
+    p.add_argument("--workers", type=positive_int("--workers"), default=1,
                    help="processes working in parallel (1: this process)")
     p.add_argument("--engine", choices=["local", "ray"], default="local",
                    help="local: this machine (--workers processes); ray: one Ray task per "
