@@ -129,6 +129,11 @@ def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspe
 #: gain for 112 s; at 618 charts (noisy camel_b refined once) 68.2 -> 71.8 % for 15 s, at
 #: 268 (noisy cow) 69.6 -> 74.0 % (session 18, issue 18).
 COMPACT_CHARTS = 1000
+#: Nor when its charts hold fewer faces than this on average: a noisy cow (0.5 % noise, 852
+#: charts of 6.5 faces) spent 132 s compacting for the same coverage (session 27); the
+#: compactions that paid had 20-23 faces a chart (noisy cow at 268 charts, noisy camel_b
+#: refined once at 618).
+COMPACT_MIN_FACES = 12
 
 
 def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 1024,
@@ -180,7 +185,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       the border too): camel_b 80 -> 113 charts, 63.2 -> 72.0 % covered; camelhead 67 ->
       88, 61.6 -> 72.1 %; cow 110 -> 146 (xatlas 107), 67.6 -> 71.7 %; E_sd and max
       ``s1/s2`` never higher; the atlas takes 1.1-3x the time.  Not above
-      :data:`COMPACT_CHARTS` charts (a noisy mesh's), where the cuts gain nothing.
+      :data:`COMPACT_CHARTS` charts, nor under :data:`COMPACT_MIN_FACES` faces a chart (a
+      noisy mesh's), where the cuts gain nothing.
     - ``start``: each chart's start, ``"conformal"`` (the default: its least-squares
       conformal map, :mod:`~jaxparam.atlas.lscm`, or its convex-combination map where that
       inverts a triangle) or ``"convex"`` (the convex-combination map, boundary on a
@@ -324,7 +330,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         if compact > 0:
             k = int(chart.max()) + 1
             made = False
-            if k <= COMPACT_CHARTS:
+            if k <= COMPACT_CHARTS and F.shape[0] >= COMPACT_MIN_FACES * k:
                 chart2, corner_uv2, made = _compact(V, F, chart, corner_uv, adj_csr, en, solver,
                                                     max_iters, max_new=int(compact * k),
                                                     accept=float(compact_accept))

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import SolverError
 
-__all__ = ["Packing", "min_area_rotation", "min_square_rotation", "rasterize", "pack_charts",
+__all__ = ["Packing", "MANY_CHARTS", "MANY_CHARTS_STEPS", "min_area_rotation", "min_square_rotation", "rasterize", "pack_charts",
            "place_square", "fill_square", "fill_contact", "grown"]
 
 
@@ -514,6 +514,13 @@ def fill_contact(masks, size: int, margin: int, order: np.ndarray | None = None,
 #: took 148 s (63.2 % covered) with every chart placed by contact, 63 s (62.1 %) with 300,
 #: 23 s (60.6 %) with none (session 18, issue 18).  The shared meshes have 11-160 charts.
 CONTACT_CHARTS = 300
+#: Above this many charts :func:`pack_charts` bisects the scale in :data:`MANY_CHARTS_STEPS`
+#: steps instead of ``refine_steps``: each step packs every chart once or twice, and a noisy
+#: cow (0.5 % noise, 852 charts of 6.5 faces each) spent 83 s in its 12 fills, 2.5-11 s each,
+#: 237 s in all with its compaction (session 27's held-out sweep).
+MANY_CHARTS = 300
+#: The bisection steps above :data:`MANY_CHARTS` charts.
+MANY_CHARTS_STEPS = 3
 
 
 def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 1024,
@@ -532,7 +539,8 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     6 resolve the area to 0.2 %: against 4, session 10, same charts, 3holes 70.0 -> 70.4 %,
     camelhead 72.1 -> 72.4 %, cow 71.7 -> 71.9 %, rocker-arm 70.7 -> 71.0 %, none lower);
     ``contact_charts``: the most-contact fill places at most this many charts, the largest;
-    the rest go bottom-left (:data:`CONTACT_CHARTS`).
+    the rest go bottom-left (:data:`CONTACT_CHARTS`).  Above :data:`MANY_CHARTS` charts the
+    bisection takes at most :data:`MANY_CHARTS_STEPS` steps.
     **Returns:** a :class:`Packing`.
     """
     k = int(chart.max()) + 1
@@ -613,12 +621,13 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
     # bisection on the area covered, in the fixed square: lo fits (the packing above), hi may not;
     # a scale fits when the bottom-left fill or else the (slower) most-contact fill places all
     lo, hi = best[0] * size, best[0] * size * np.sqrt(refine_gain)       # cells per 3D unit
-    for _ in range(int(refine_steps)):
+    steps = int(refine_steps) if k <= MANY_CHARTS else min(int(refine_steps), MANY_CHARTS_STEPS)
+    for _ in range(steps):
         s = 0.5 * (lo + hi)
         masks = _chart_masks(local, seg, seg_of, s)
         placed = fill_square(masks, inner, m)
         attempt += 1
-        if placed is None:
+        if placed is None and int(contact_charts) > 0:      # (lead 0 is the same bottom-left fill)
             placed = fill_contact(masks, inner, m, lead=int(contact_charts))
             attempt += 1
         if placed is None:
