@@ -57,7 +57,8 @@ from .triangles import barycentric, locate, signed_area2
 from .progress import progress
 from .stretch_map import reweighted_stretch_map
 
-__all__ = ["Remesh", "RemeshErrors", "remesh", "check_remesh_input", "area_aware_map", "area_map_iters", "measure_errors",
+__all__ = ["Remesh", "RemeshErrors", "remesh", "check_remesh_input", "area_aware_map", "area_map_iters",
+           "measure_errors",
            "default_samples", "level_errors", "base_domain", "refine_domain", "snap_boundary",
            "BoundaryCurve"]
 

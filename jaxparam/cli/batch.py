@@ -40,7 +40,6 @@ exit codes are the pipeline's table.
 """
 from __future__ import annotations
 
-import argparse
 import concurrent.futures as cf
 import json
 import multiprocessing

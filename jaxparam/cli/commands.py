@@ -377,10 +377,11 @@ def cmd_manifold(args) -> int:
     if getattr(args, "fidelity", False):
         rep["fidelity"] = fidelity(param, semi, mesh).as_dict()
         clock("fidelity")
+    _warn_folded(rep["folded"], out.n_faces)
     return finish(args, out, None, report=rep, plot=drawing("plot_remesh", semi),
                   line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, genus "
                        f"{t.genus}, subdivision connectivity of order {args.levels} over "
-                       f"{base.n_faces} base faces{_folded_note(rep['folded'], out.n_faces)}")
+                       f"{base.n_faces} base faces{_folded_note(rep['folded'])}")
 
 
 def _folded(semi, mesh) -> int:
@@ -392,20 +393,23 @@ def _folded(semi, mesh) -> int:
                         np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces))
 
 
-def _folded_note(folded, faces: int) -> str:
-    """The success line's word on folded remesh faces (nothing when there are none), after a
-    warning on stderr with the remedy (the line alone went unnoticed: cow's level-3 remesh
-    folds 311 of 6,400 faces; session 27)."""
+def _warn_folded(folded, faces: int) -> None:
+    """A warning on stderr, with the remedy, when the remesh has folded faces (the success
+    line's count alone went unnoticed: cow's level-3 remesh folds 311 of 6,400; session 27)."""
     n = int(np.sum(folded))
-    if not n:
-        return ""
-    print(f"jaxparam manifold: warning: {n} of the remesh's {faces} faces "
-          f"({100 * n / max(faces, 1):.1f} %) are folded: they face against the input surface "
-          "where their corners lie, where the map stretches a thin or sharp part; more base "
-          "faces fold fewer (cow at 25,600 faces: 100 base faces at level 4 fold 800, 400 at "
-          "level 3 fold 160)", file=sys.stderr)
+    if n:
+        print(f"jaxparam manifold: warning: {n} of the remesh's {faces} faces "
+              f"({100 * n / max(faces, 1):.1f} %) are folded: they face against the input surface "
+              "where their corners lie, where the map stretches a thin or sharp part; more base "
+              "faces fold fewer (cow at 25,600 faces: 100 base faces at level 4 fold 800, 400 at "
+              "level 3 fold 160)", file=sys.stderr)
+
+
+def _folded_note(folded) -> str:
+    """The success line's word on folded remesh faces (nothing when there are none)."""
+    n = int(np.sum(folded))
     return (f"; {n} folded faces (facing against the input faces their corners lie on; "
-            "--fidelity gives the distances too)")
+            "--fidelity gives the distances too)") if n else ""
 
 
 def _manifold_components(args, mesh, clock) -> int:
@@ -443,9 +447,10 @@ def _manifold_components(args, mesh, clock) -> int:
            "genus": [r["genus"] for r in rows], "base_faces": sum(r["base_faces"] for r in rows),
            "levels": args.levels, "input_vertices": mesh.n_vertices, "input_faces": mesh.n_faces,
            "seconds": clock}
+    _warn_folded([r["folded"] for r in rows], out.n_faces)
     return finish(args, out, None, report=rep, plot=drawing("plot_remesh", semis),
                   line=f"{args.output}: {out.n_vertices} vertices, {out.n_faces} faces, "
                        f"{len(parts)} components of genus {', '.join(str(r['genus']) for r in rows)}, "
                        f"subdivision connectivity of order {args.levels} over "
                        f"{', '.join(str(r['base_faces']) for r in rows)} base faces"
-                       f"{_folded_note([r['folded'] for r in rows], out.n_faces)}")
+                       f"{_folded_note([r['folded'] for r in rows])}")

@@ -136,9 +136,10 @@ def flip_warning(rep: dict) -> str | None:
         why = (": the boundary polygon is not convex (a projection onto a plane is not), so "
                "Theorem 1 does not hold; use --boundary circle or square")
     elif t1 and t1.get("positive_weights") is False:
-        why = (f": {t1.get('negative_weights', 'some')} weights are negative (harmonic weights are "
-               "where the two angles opposite an edge sum to more than 180 degrees), so Theorem 1 does not hold; use --weights "
-               "shape-preserving (the default) or mean-value, which never fold")
+        why = (f": {t1.get('negative_weights', 'some')} weights are negative (a harmonic weight "
+               "is where the two angles opposite its edge sum to more than 180 degrees), so "
+               "Theorem 1 does not hold; use --weights shape-preserving (the default) or "
+               "mean-value, which never fold")
     elif t1.get("holds"):
         why = (": Theorem 1 holds, so these are faces the map shrank below floating-point "
                "resolution, as a convex map does to a long or thin part far from the boundary "
