@@ -137,7 +137,7 @@ def flip_warning(rep: dict) -> str | None:
                "Theorem 1 does not hold; use --boundary circle or square")
     elif t1 and t1.get("positive_weights") is False:
         why = (f": {t1.get('negative_weights', 'some')} weights are negative (a harmonic weight "
-               "is where the two angles opposite its edge sum to more than 180 degrees), so "
+               "is negative where the two angles opposite its edge sum to more than 180 degrees), so "
                "Theorem 1 does not hold; use --weights shape-preserving (the default) or "
                "mean-value, which never fold")
     elif t1.get("holds"):
