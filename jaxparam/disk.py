@@ -11,10 +11,10 @@ import numpy as np
 
 from .lazy_jax import jax, jnp  # JAX loads on first use (issue 17)
 from . import topology as topo
-from .errors import TopologyError, first_few
-from .mesh import TriMesh
+from .errors import MeshError, TopologyError, first_few
+from .mesh import TriMesh, refuse_zero_area
 
-__all__ = ["disk_check", "fill_holes", "unstitched"]
+__all__ = ["disk_check", "fill_holes", "unstitched", "check_remesh_input"]
 
 
 def disk_check(mesh: TriMesh, where: str) -> None:
@@ -92,3 +92,26 @@ def fill_holes(mesh: TriMesh) -> tuple[TriMesh, int]:
     F = np.concatenate(faces)
     filled = TriMesh(V, F, topo.build(F, n + len(holes), where="fill_holes"), validate=False)
     return filled, len(holes)
+
+
+def check_remesh_input(mesh: TriMesh, levels, *, base_faces=6, corners=None) -> None:
+    """Refuse what :func:`jaxparam.remesh.remesh` cannot remesh, before any work
+    (:class:`MeshError` or :class:`TopologyError`): not a disk (closed, several components, several boundary loops),
+    zero-area faces, ``levels`` outside ``[0, 10]``, ``base_faces`` not an integer, or both
+    ``base_faces`` and ``corners``.  ``jaxparam remesh`` calls it before its map (an annulus
+    got "the convex map folds" after the map's work, a levels of -1 took 9 s to refuse;
+    session 27)."""
+    if corners is not None and base_faces != 6:
+        raise MeshError("remesh: pass base_faces or corners, not both (corners is base_faces' "
+                        "alias that also takes positions in the boundary loop).")
+    if not isinstance(base_faces, (int, np.integer)):
+        raise MeshError(f"remesh: base_faces must be an integer (the fan's corner count), got "
+                        f"{base_faces!r}; pass positions in the boundary loop as corners=.")
+    if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= 10):
+        raise MeshError(f"remesh: levels must be an integer in [0, 10], got {levels!r}.")
+    disk_check(mesh, "remesh")
+    refuse_zero_area(mesh, "remesh")
+    loops = len(mesh.topology.boundary_loops)
+    if loops != 1:
+        raise MeshError(f"remesh: the mesh has {loops} boundary loops; remeshing needs a disk "
+                        "(one boundary loop): fill the holes first (e.g. trimesh's fill_holes).")

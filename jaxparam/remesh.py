@@ -44,12 +44,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import MeshError, first_few
-from .disk import disk_check
+from .disk import check_remesh_input
 from . import geometry
 from .distance import point_triangle_distance, surface_distance
 from .energies import ENERGIES, density_stretch
 from .linear import check_unfolded, convex_map
-from .mesh import TriMesh, concrete_values, refuse_zero_area
+from .mesh import TriMesh, concrete_values
 from .io import as_mesh
 from .optimize import Newton, Problem, StopRules, minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
@@ -548,29 +548,6 @@ def _sample_where_the_error_is(mesh, uv, area, weight, levels: int, corners) -> 
         weight = weight * at_v[F].mean(1)
         uv = _stretch_newton(mesh, uv, area * weight, AREA_MAP_ROUND_ITERS)
     return best
-
-
-def check_remesh_input(mesh: TriMesh, levels, *, base_faces=6, corners=None) -> None:
-    """Refuse what :func:`remesh` cannot remesh, before any work (:class:`MeshError` or
-    :class:`TopologyError`): not a disk (closed, several components, several boundary loops),
-    zero-area faces, ``levels`` outside ``[0, 10]``, ``base_faces`` not an integer, or both
-    ``base_faces`` and ``corners``.  ``jaxparam remesh`` calls it before its map (an annulus
-    got "the convex map folds" after the map's work, a levels of -1 took 9 s to refuse;
-    session 27)."""
-    if corners is not None and base_faces != 6:
-        raise MeshError("remesh: pass base_faces or corners, not both (corners is base_faces' "
-                        "alias that also takes positions in the boundary loop).")
-    if not isinstance(base_faces, (int, np.integer)):
-        raise MeshError(f"remesh: base_faces must be an integer (the fan's corner count), got "
-                        f"{base_faces!r}; pass positions in the boundary loop as corners=.")
-    if not (isinstance(levels, (int, np.integer)) and 0 <= levels <= 10):
-        raise MeshError(f"remesh: levels must be an integer in [0, 10], got {levels!r}.")
-    disk_check(mesh, "remesh")
-    refuse_zero_area(mesh, "remesh")
-    loops = len(mesh.topology.boundary_loops)
-    if loops != 1:
-        raise MeshError(f"remesh: the mesh has {loops} boundary loops; remeshing needs a disk "
-                        "(one boundary loop): fill the holes first (e.g. trimesh's fill_holes).")
 
 
 def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corners=None,
