@@ -89,6 +89,36 @@ def test_compiled_nearest_faces_give_numpys_distances_on_degenerate_faces():
     assert point_triangle_distance(P[:0], V, F)[0].shape == (0,)
 
 
+def test_the_kept_tree_answers_for_its_own_mesh_only(monkeypatch):
+    # libigl's tree is kept between queries of one mesh (the closed meshes' finish stage asks
+    # ~40 times); a mesh with the same shape but other positions or faces gets its own tree,
+    # and every answer is numpy's search's
+    igl = pytest.importorskip("igl", reason="the fast extra is not installed")
+    import jaxparam.distance as dist
+    built = []
+
+    class Counted(igl.AABB):
+        def init(self, V, F):
+            built.append(len(V))
+            return super().init(V, F)
+
+    monkeypatch.setattr(igl, "AABB", Counted)
+    monkeypatch.setattr(dist, "_TREES", {})
+    mesh = jp.shapes.sphere(2)
+    V, F = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    P = np.random.default_rng(3).normal(size=(500, 3))
+    meshes = [(V, F), (V.copy(), F), (V + 0.1, F), (V, F[:, [0, 2, 1]]), (V, F)]
+    counts = []
+    for V_, F_ in meshes:
+        d, _, _ = point_triangle_distance(P, V_, F_)
+        counts.append(len(built))
+        d0, _, _ = point_triangle_distance(P, V_, F_, compiled=False)
+        np.testing.assert_allclose(d, d0, rtol=0, atol=1e-15 * bounding_diagonal(V_))
+    # the copy reuses the first tree; the last mesh was pushed out by the two before it
+    assert counts == [1, 1, 2, 3, 4]
+    assert len(dist._TREES) == dist._TREES_KEPT
+
+
 def test_closest_point_is_never_beaten_by_samples_of_the_triangle():
     rng = np.random.default_rng(1)
     A, B, C = (rng.normal(size=(200, 3)) for _ in range(3))
