@@ -25,7 +25,7 @@ from .options import choose
 
 __all__ = [
     "arc_parameters", "circle", "square", "polygon", "plane", "plane_frame", "check_plane_boundary",
-    "boundary_uv", "is_convex_polygon", "crossing_edges", "SHAPES", "SPACINGS",
+    "boundary_uv", "check_user_uv", "is_convex_polygon", "crossing_edges", "SHAPES", "SPACINGS",
     "boundary_loop", "BoundaryUV", "user_boundary", "in_loop_order",
 ]
 
@@ -501,6 +501,30 @@ def _checked(idx: np.ndarray, uv) -> BoundaryUV:
         raise MeshError(f"boundary_indices: vertices {first_few(u[counts > 1])} are given more "
                         "than once; give each boundary vertex one UV.")
     return BoundaryUV(idx, uv)
+
+
+def check_user_uv(uv) -> None:
+    """Refuse user boundary UVs ``(k, 2)`` (in loop order) that no convex-combination map
+    can use: non-finite rows, or a polygon that runs clockwise or encloses no area (every
+    triangle of the map would turn over or collapse; the loop runs counter-clockwise, the
+    interior on its left).  Traced UVs are not checked."""
+    if not _is_concrete(uv):
+        return
+    U = np.asarray(uv, np.float64)
+    bad = np.flatnonzero(~np.isfinite(U).all(axis=1))
+    if bad.size:
+        raise MeshError(f"boundary: the user boundary UVs (one row per boundary-loop vertex, "
+                        f"{len(U)} rows in loop order) are not finite in rows {first_few(bad)}: "
+                        "give every boundary vertex a finite (u, v).")
+    area = 0.5 * float(np.sum(U[:, 0] * np.roll(U[:, 1], -1) - np.roll(U[:, 0], -1) * U[:, 1]))
+    extent = float(np.max(np.ptp(U, axis=0))) if len(U) else 0.0
+    if area <= 1e-12 * extent * extent:
+        what = ("run clockwise (signed area {:.3g}): mirror them (negate one coordinate), keeping "
+                "the rows in loop order".format(area) if area < -1e-12 * extent * extent else
+                "enclose no area (all on one point or one line): place them on a convex polygon")
+        raise MeshError(f"boundary: the user boundary UVs {what}.  The boundary loop runs "
+                        "counter-clockwise with the interior on its left, so every triangle of "
+                        "the map would turn over or collapse.")
 
 
 def in_loop_order(boundary, loop: np.ndarray):

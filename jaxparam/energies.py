@@ -569,6 +569,8 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
         raise MeshError(f"energy: fn must be a function of the singular values (s1, s2) or of "
                         f"the Jacobian (J), got {fn!r}{hint}.")
     parametric = params is not _NO_PARAMS
+    if parametric:
+        _check_params(params)
     try:
         args = [p for p in inspect.signature(fn).parameters.values()
                 if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) and p.default is p.empty]
@@ -594,6 +596,23 @@ def energy(fn: Callable, params=_NO_PARAMS, *, name: str | None = None,
         symmetric = looks_invariant(fn, 2, SWAP, *extra)
     return _from_sv(label, fn, scale_invariant, barrier=barrier, parametric=parametric,
                     params=params if parametric else None, symmetric=symmetric)
+
+
+def _check_params(params) -> None:
+    """Refuse energy parameters that are not a pytree of real numbers or real arrays (a
+    string, an object, complex numbers): JAX would fail on them only inside minimize."""
+    for path, leaf in jax.tree_util.tree_leaves_with_path(params):
+        if isinstance(leaf, jax.core.Tracer):
+            continue
+        try:
+            kind = np.asarray(leaf).dtype.kind
+        except Exception:       # noqa: BLE001 - an object numpy cannot hold as an array
+            kind = "O"
+        if kind not in "biuf":
+            where = jax.tree_util.keystr(path) or "params"
+            raise MeshError(f"energy: params must be a pytree of real numbers or real arrays (a "
+                            f"float, an array, a tuple or dict of them), got {leaf!r} at "
+                            f"{where}.")
 
 
 def _check_scalar(fn: Callable, n: int, params, parametric: bool) -> None:

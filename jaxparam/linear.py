@@ -80,6 +80,7 @@ def _boundary_key(boundary, k: int):
     if uv.shape != (k, 2):
         raise MeshError(f"boundary: the user boundary UVs must have shape ({k}, 2), one row per "
                         f"vertex of the longest boundary loop in loop order, got {tuple(uv.shape)}.")
+    bmap.check_user_uv(uv)
     return "user", uv
 
 

@@ -74,6 +74,9 @@ class TriMesh:
             V = np.asarray(vertices)
             if V.dtype == object or not (np.issubdtype(V.dtype, np.number)):
                 raise MeshError(f"TriMesh: vertices must be numbers, got dtype {V.dtype}.")
+            if np.iscomplexobj(V):
+                raise MeshError(f"TriMesh: vertices must be real numbers, got dtype {V.dtype}; "
+                                "pass their real part (V.real) if that is what you mean.")
             V = V.astype(np.float64, copy=False)
         else:
             V = vertices

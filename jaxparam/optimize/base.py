@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .. import tol
-from ..errors import MeshError, SolverError
+from ..errors import MeshError, SolverError, first_few
 from ..options import is_integer, is_number
 from ..progress import progress
 from .problem import Problem
@@ -148,9 +148,28 @@ def start_point(problem: Problem):
     x = np.asarray(problem.x0)
     f, g = problem.value_and_grad(x)
     if not np.isfinite(f):
-        raise SolverError(f"minimize: the start has infinite energy ({problem.en.name}); "
-                          "a degenerate or inverted triangle?", stage="init")
+        raise SolverError(_non_finite_start(problem, x, f), stage="init")
     return x, f, g
+
+
+def _non_finite_start(problem: Problem, x, f: float) -> str:
+    """Why the start's energy ``f`` is not finite: the faces whose terms are not, and whether
+    their start triangles are turned over or degenerate (the start's fault) or positive (the
+    energy's: it is not finite on a valid triangle)."""
+    what = "NaN" if np.isnan(f) else "infinite"
+    terms, areas = problem.face_energies(x)
+    bad = np.flatnonzero(~np.isfinite(terms))
+    head = f"minimize: the start's energy ({problem.en.name}) is {what}"
+    if not bad.size:
+        return head + "; a degenerate or inverted triangle?"
+    worn = bad[areas[bad] <= 0]
+    if worn.size:
+        return (f"{head} on faces {first_few(worn)}, whose start triangles are turned over or "
+                "degenerate: start from a flip-free map (init=, e.g. jp.convex_map(mesh)).")
+    return (f"{head} on faces {first_few(bad)}, whose start triangles are positive (face "
+            f"{bad[0]}: signed UV area {areas[bad[0]]:.3g}): the energy itself is not finite "
+            "there; check its formula (a log or a root of a negative number?) on valid "
+            "triangles.")
 
 
 def progress_bar(problem: Problem, solver: Solver, total: int, verbose: bool | None):
