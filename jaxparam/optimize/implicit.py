@@ -77,7 +77,7 @@ from .in_callback import host_callback
 from .newton import sparse_hessian
 from .problem import Problem, energy_at, free_vertices, normalized, uv_of
 
-__all__ = ["minimize_traced", "Forward", "Runs", "TracedInfo", "TIKHONOV", "REFINE_STEPS",
+__all__ = ["minimize_traced", "Forward", "Runs", "TracedInfo", "TIKHONOV", "REFINE_STEPS", "IMPLICIT_RESIDUAL",
            "NULL_RTOL", "POLISH_STEPS", "unconverged_gradient", "is_traced", "polish", "cotangents"]
 
 #: Relative diagonal shift of the backward pass's Hessian (times ``|mean diag H|``): it
@@ -88,6 +88,14 @@ TIKHONOV = 1e-9
 #: Iterative-refinement steps of the backward solve against the unshifted Hessian (each
 #: stops early once the residual is at rounding level).
 REFINE_STEPS = 4
+
+#: The relative residual the backward solve may leave, judged against the unshifted ``H``
+#: after refinement (a Hessian singular beyond the known motions leaves the part of the
+#: gradient outside its range, far above this).  The shifted factor's own solves are held
+#: to it too: with a free boundary that matrix is nearly singular along the rigid motions
+#: (condition ~ 1 / TIKHONOV), which the projection removes anyway, and the sparse module's
+#: default 1e-8 refused sound systems at 1.09e-8 (session 28).
+IMPLICIT_RESIDUAL = 1e-6
 
 #: Newton steps (unprojected Hessian, full steps) that polish a converged optimum before it
 #: is differentiated: the solvers stop when the energy stops decreasing in floating point,
@@ -418,16 +426,21 @@ def _implicit_solve(prob: Problem, x, g):
     shifted = vals.copy()
     shifted[hp.diag] += TIKHONOV * max(abs(float(np.mean(vals[hp.diag]))), 1e-300)
     fac = sparse.factorize(P, shifted, symmetric=False)
-    lam = project(fac.solve(g))
+    lam = project(fac.solve(g, residual_tol=IMPLICIT_RESIDUAL))
     r = g - project(H @ lam)
     rn = np.linalg.norm(r)
     for _ in range(REFINE_STEPS):
         if rn <= 1e-15 * gn:
             break
-        cand = project(lam + fac.solve(r))
+        cand = project(lam + fac.solve(r, residual_tol=IMPLICIT_RESIDUAL))
         r_new = g - project(H @ cand)
         rn_new = np.linalg.norm(r_new)
         if not rn_new < rn:         # refinement does not converge (an indefinite H far from
             break                   # a minimum): keep the best iterate
         lam, r, rn = cand, r_new, rn_new
+    if not rn <= IMPLICIT_RESIDUAL * gn:
+        raise SolverError(f"sparse: the solve of a {P.n} x {P.n} system left a relative residual "
+                          f"of {rn / gn:.3g} (> {IMPLICIT_RESIDUAL:g}) against the unshifted "
+                          "Hessian; the matrix is singular or badly conditioned.",
+                          stage="gradient")
     return lam
