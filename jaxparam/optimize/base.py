@@ -63,6 +63,15 @@ REASONS = {
     "max_steps": "optimistix max_steps reached",
 }
 
+#: A run stopped because the energy stopped falling (``"no_decrease"``, ``"energy"``) counts
+#: as converged only near a stationary point: its gradient norm fell to ``STALL_GRAD_SHARE``
+#: of the start's, or moving the free UVs by a relative ``e`` changes the energy by at most
+#: ``STALL_RTOL e`` relative (``|g| |x - mean x| <= STALL_RTOL |f|``).  An energy unbounded
+#: below (``-(s1^2 + s2^2)`` with a free boundary) stalled at the flip-free line search with
+#: its start's gradient and was reported converged (session 28).
+STALL_GRAD_SHARE = 1e-2
+STALL_RTOL = 1e-4
+
 
 @dataclass(frozen=True)
 class StopRules:
@@ -189,7 +198,9 @@ class Monitor:
 
     def __init__(self, stop: StopRules, patience: int, f0: float, g0, t0: float, bar):
         self.stop, self.patience, self.t0, self.bar = stop, patience, t0, bar
-        self.grad_tol = stop.grad_rtol * max(np.linalg.norm(g0), np.finfo(float).tiny)
+        self.grad0 = float(np.linalg.norm(g0))
+        self.grad_norm = self.grad0               # at the last recorded iterate
+        self.grad_tol = stop.grad_rtol * max(self.grad0, np.finfo(float).tiny)
         self.history = [f0]
         self.times = [time.perf_counter() - t0]
         self.reason, self.converged, self.stopped = REASONS["max_iters"], False, False
@@ -207,6 +218,7 @@ class Monitor:
         self.history.append(f)
         self.times.append(time.perf_counter() - self.t0)
         self.bar.update(1)
+        self.grad_norm = float(grad_norm)
         self.small = self.small + 1 if 0 <= decrease < self.stop.energy_rtol else 0
         if step_length == 0.0:
             self.reason, self.converged = REASONS["no_decrease"], True
@@ -222,6 +234,18 @@ class Monitor:
         self.stopped = True
         return True
 
+    def _stationary(self, x, f: float, reason: str) -> tuple[bool, str]:
+        """``(converged, reason)`` of a run stopped by a stall rule at ``x`` (free UVs, flat)
+        with energy ``f``, by :data:`STALL_GRAD_SHARE` and :data:`STALL_RTOL`."""
+        g = self.grad_norm
+        U = np.asarray(x, np.float64).reshape(-1, 2)
+        spread = float(np.linalg.norm(U - U.mean(0))) if U.size else 0.0
+        if g <= STALL_GRAD_SHARE * self.grad0 or g * spread <= STALL_RTOL * abs(f):
+            return True, reason
+        return False, (f"{reason}, but not at a stationary point (gradient norm {g:.3g}, "
+                       f"{g / max(self.grad0, np.finfo(float).tiny):.2g} of the start's): the "
+                       "energy may be unbounded below, not smooth, or stiff beyond the solver")
+
     @classmethod
     def start(cls, problem: Problem, solver: Solver, stop: StopRules, verbose: bool):
         """Start a run: ``(x0, f0, g0, monitor)``, the clock and the progress bar running
@@ -236,9 +260,12 @@ class Monitor:
         """Close the bar and return the :class:`SolveResult` at ``x`` (energy ``f``);
         ``reason`` and ``converged`` default to the rule that stopped the run."""
         self.bar.close()
+        converged = self.converged if converged is None else converged
+        reason = self.reason if reason is None else reason
+        if converged and reason in (REASONS["no_decrease"], REASONS["energy"]):
+            converged, reason = self._stationary(x, f, reason)
         return SolveResult(x=x, energy=f, iterations=self.iterations,
-                           converged=self.converged if converged is None else converged,
-                           reason=self.reason if reason is None else reason,
+                           converged=converged, reason=reason,
                            history=self.history, times=self.times,
                            seconds=time.perf_counter() - self.t0)
 

@@ -36,7 +36,9 @@ class MinimizeResult:
 
     **Fields:** ``uv (n, 2)`` (a JAX array, differentiable, when an input was traced);
     ``energy`` (final, area-weighted mean density);
-    ``iterations`` (accepted steps); ``converged``; ``history`` (energy after each
+    ``iterations`` (accepted steps); ``converged`` (a stop because the energy stopped
+    falling counts only near a stationary point: :data:`~jaxparam.optimize.base.STALL_RTOL`;
+    ``reason`` then says so); ``history`` (energy after each
     iteration, the start first); ``seconds`` (wall time, compilation included);
     ``reason`` (why it stopped); ``flips`` (always 0 from an injective start);
     ``boundary_overlaps`` (free boundary: crossings of the boundary with itself;
