@@ -58,3 +58,28 @@ def test_decimations_that_never_stall_are_unchanged(monkeypatch):
     monkeypatch.setattr(M, "STALL_LEVELS", 1)
     monkeypatch.setattr(M, "STALL_SHARE", 1.0)                # every level a stall: hubs shared
     assert not same(now, M.decimate_caps(V, F, 60, M.AREA_CAPS, verbose=False))
+
+
+def test_a_mesh_above_the_choice_size_is_decimated_with_the_large_mesh_cap(monkeypatch):
+    # Above SELECT_MAX_FACES one base domain is made, with LARGE_MESH_CAP (uncapped, a dense
+    # bunny's level-4 remesh lay 0.662 % of the diagonal off, capped 0.325 %); a large
+    # base-face count on a small mesh keeps the first cap.  The size rule is lowered here so
+    # that a small torus stands for a large mesh.
+    import importlib
+    P = importlib.import_module("jaxparam.manifold.parameterization")
+    seen = []
+    real = P.decimate_caps
+
+    def spy(V, F, base_faces, caps, **kw):
+        seen.append(tuple(caps))
+        return real(V, F, base_faces, caps, **kw)
+
+    monkeypatch.setattr(P, "decimate_caps", spy)
+    torus = jp.shapes.torus(16, 10)
+    monkeypatch.setattr(P, "SELECT_MAX_FACES", torus.n_faces - 1)
+    jp.manifold_map(torus, 40, verbose=False)
+    monkeypatch.setattr(P, "SELECT_MAX_FACES", torus.n_faces)
+    monkeypatch.setattr(P, "SELECT_MAX_REMESH_FACES", 0)
+    jp.manifold_map(torus, 40, verbose=False)
+    assert seen == [(P.LARGE_MESH_CAP,), (M.AREA_CAPS[0],)]
+    assert P.LARGE_MESH_CAP in M.AREA_CAPS and P.LARGE_MESH_CAP is not None

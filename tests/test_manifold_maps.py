@@ -456,7 +456,7 @@ def test_the_area_cap_keeps_base_faces_from_holding_a_large_share_of_the_surface
 def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
     # With several area caps, the base domain kept is the one whose default remesh the
     # estimate finds closest to the input (before its tips are snapped and its fans
-    # contracted, which is done to the one kept); above SELECT_MAX_FACES, the first cap's.
+    # contracted, which is done to the one kept); above SELECT_MAX_FACES, LARGE_MESH_CAP's.
     from jaxparam.manifold import parameterization as P
     from jaxparam.manifold.relax import estimated_distance, sharpest_vertices
     mesh = plate(2, n=4)
@@ -476,8 +476,9 @@ def test_manifold_map_keeps_the_base_domain_estimated_closest(monkeypatch):
     assert np.array_equal(param.base_vertices, want.base_vertices)
     assert np.array_equal(param.base_faces, want.base_faces)
     monkeypatch.setattr(P, "SELECT_MAX_FACES", 0)
+    monkeypatch.setattr(P, "LARGE_MESH_CAP", caps[1])
     _, param = manifold_map(mesh, 40, verbose=False)
-    assert np.array_equal(param.base_vertices, params[0].base_vertices)
+    assert np.array_equal(param.base_vertices, params[1].base_vertices)
     # Nor for base domains whose level-SELECT_LEVEL remesh is too large to compare (session
     # 21: cow at 5,518 base faces took 255 s choosing, for a level-2 remesh).
     monkeypatch.setattr(P, "SELECT_MAX_FACES", 10 ** 9)

@@ -421,6 +421,15 @@ METHODS = ("maps", "paths")
 SELECT_MAX_FACES = 30_000
 SELECT_LEVEL = 4
 
+#: The one area cap (of :data:`~jaxparam.manifold.maps.AREA_CAPS`) an input of more than
+#: :data:`SELECT_MAX_FACES` faces is decimated with.  Uncapped, the flat parts of a dense
+#: input grow into base faces that hold many times the mean area, and the level-4 samples
+#: crowd elsewhere (session 28, level 4 at 100 base faces, % of the diagonal, no cap -> this
+#: cap, same seconds: bunny refined twice, 111k faces, 0.662 -> 0.325; bunny Loop-subdivided
+#: twice 0.796 -> 0.444; cow refined twice 5.53 -> 2.61; 3holes refined twice 0.243 -> 0.245;
+#: rocker-arm refined with noise 0.456 -> 0.476).
+LARGE_MESH_CAP = (1.5, 3, 1)
+
 #: The choice among base domains runs only while the level :data:`SELECT_LEVEL` remesh it
 #: compares has at most this many faces (``base_faces * 4 ** SELECT_LEVEL``: up to 468 base
 #: faces); with more base faces the first cap's domain is kept, as above
@@ -545,7 +554,8 @@ def _maps_route(mesh: TriMesh, base_faces: int, verbose):
     Fm = np.asarray(mesh.faces, np.int64)
     choose = (mesh.n_faces <= SELECT_MAX_FACES
               and base_faces * 4 ** SELECT_LEVEL <= SELECT_MAX_REMESH_FACES)
-    caps = AREA_CAPS if choose else AREA_CAPS[:1]
+    caps = (AREA_CAPS if choose else (LARGE_MESH_CAP,) if mesh.n_faces > SELECT_MAX_FACES
+            else AREA_CAPS[:1])
     best, sharp = None, None
     # The decimations run together while they make the same collapses (issue 13); each
     # result is the one decimating with its cap alone gives, or the error it raises.
