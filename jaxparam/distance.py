@@ -133,7 +133,9 @@ def _igl_tree(V: np.ndarray, F: np.ndarray):
     except ImportError:
         return None
     import hashlib
-    key = (V.shape, F.shape, hashlib.blake2b(V.tobytes() + F.tobytes(), digest_size=16).digest())
+    digest = hashlib.blake2b(V.data, digest_size=16)      # contiguous arrays: no copies
+    digest.update(F.data)
+    key = (V.shape, F.shape, digest.digest())
     hit = _TREES.pop(key, None)
     if hit is None:
         if not _TREES:                        # the trees go before nanobind's exit-time check

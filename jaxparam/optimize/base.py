@@ -171,9 +171,9 @@ def _non_finite_start(problem: Problem, x, f: float) -> str:
     head = f"minimize: the start's energy ({problem.en.name}) is {what}"
     if not bad.size:
         return head + "; a degenerate or inverted triangle?"
-    worn = bad[areas[bad] <= 0]
-    if worn.size:
-        return (f"{head} on faces {first_few(worn)}, whose start triangles are turned over or "
+    turned = bad[areas[bad] <= 0]
+    if turned.size:
+        return (f"{head} on faces {first_few(turned)}, whose start triangles are turned over or "
                 "degenerate: start from a flip-free map (init=, e.g. jp.convex_map(mesh)).")
     return (f"{head} on faces {first_few(bad)}, whose start triangles are positive (face "
             f"{bad[0]}: signed UV area {areas[bad[0]]:.3g}): the energy itself is not finite "
