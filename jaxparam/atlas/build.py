@@ -123,6 +123,14 @@ def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspe
     return ch.relabel(out_chart), out_uv
 
 
+#: Up to this many charts, the charts are packed with and without the ears moved into the
+#: neighbours' notches, and the layout that covers more is kept: a few large pieces pack by
+#: luck, and the moves cost halftunnel coverage (session 26: 66.8 -> 63.1 %; kept now: 66.9 %
+#: for 2.2 s more).  At 64, 3holes and bunny (39 and 37 charts) packed a second time for the
+#: same coverage (+4-5 s), bumpy (16) too (+1 s).
+NOTCH_CHOICE_CHARTS = 20
+
+
 #: The most charts :func:`atlas` compacts.  Above, the many small charts of a noisy mesh
 #: gain nothing from the cuts, whose second packing is as long as the first: noisy
 #: rocker-arm (1,537 charts) 62.06 -> 62.2 % covered for 109 s, noisy camelhead (1,775) no
@@ -323,9 +331,14 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 max_aspect=float(max_aspect), max_share=float(post_merge_share))
             mark("merge")
         nbr = ch.face_neighbours(t)
-        chart, corner_uv = _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters,
-                                           float(max_aspect))
-        laid = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
+        filled, filled_uv = _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters,
+                                            float(max_aspect))
+        laid = _layout(filled, filled_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
+        if filled is not chart and int(chart.max()) + 1 <= NOTCH_CHOICE_CHARTS:
+            plain = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
+            if plain[-1] > laid[-1]:
+                filled, filled_uv, laid = chart, corner_uv, plain
+        chart, corner_uv = filled, filled_uv
         mark("pack")
         if compact > 0:
             k = int(chart.max()) + 1
