@@ -22,6 +22,7 @@ from .errors import MeshError, first_few
 from .geometry import safe_norm
 from .io import as_mesh
 from .options import choose
+from .triangles import polygon_area
 
 __all__ = [
     "arc_parameters", "circle", "square", "polygon", "plane", "plane_frame", "check_plane_boundary",
@@ -243,7 +244,7 @@ def _refuse_bad_plane_boundary(P, uv, ids) -> None:
     per = float(np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1).sum())
     X = P - P.mean(axis=0)
     area3 = float(np.linalg.norm(0.5 * np.cross(X, np.roll(X, -1, axis=0)).sum(axis=0)))
-    area2 = 0.5 * float(np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1]))
+    area2 = polygon_area(uv)
     small = tol.DEGENERATE_AREA_REL * per * per
     if not (area3 > small and area2 > small):
         raise MeshError(
@@ -516,7 +517,7 @@ def check_user_uv(uv) -> None:
         raise MeshError(f"boundary: the user boundary UVs (one row per boundary-loop vertex, "
                         f"{len(U)} rows in loop order) are not finite in rows {first_few(bad)}: "
                         "give every boundary vertex a finite (u, v).")
-    area = 0.5 * float(np.sum(U[:, 0] * np.roll(U[:, 1], -1) - np.roll(U[:, 0], -1) * U[:, 1]))
+    area = polygon_area(U)
     extent = float(np.max(np.ptp(U, axis=0))) if len(U) else 0.0
     if area <= 1e-12 * extent * extent:
         what = ("run clockwise (signed area {:.3g}): mirror them (negate one coordinate), keeping "

@@ -11,7 +11,7 @@ import numpy as np
 
 from .errors import MeshError, first_few
 
-__all__ = ["orient", "signed_area2", "doubled_areas", "barycentric", "locate", "cross_norm", "corner_angle",
+__all__ = ["orient", "signed_area2", "polygon_area", "doubled_areas", "barycentric", "locate", "cross_norm", "corner_angle",
            "face_angles"]
 
 
@@ -24,6 +24,12 @@ def orient(U: np.ndarray, a, b, c) -> np.ndarray:
 def signed_area2(uv: np.ndarray, F: np.ndarray) -> np.ndarray:
     """``(m,)`` twice the signed areas of the planar faces ``F (m, 3)`` over ``uv (n, 2)``."""
     return orient(uv, F[:, 0], F[:, 1], F[:, 2])
+
+
+def polygon_area(P: np.ndarray) -> float:
+    """The signed area of the closed planar polygon ``P (k, 2)`` (shoelace; positive when it
+    runs counter-clockwise)."""
+    return 0.5 * float(np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1]))
 
 
 def doubled_areas(T: np.ndarray) -> np.ndarray:

@@ -331,11 +331,15 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 max_aspect=float(max_aspect), max_share=float(post_merge_share))
             mark("merge")
         nbr = ch.face_neighbours(t)
+
+        def layout(c, cuv):
+            return _layout(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels))
+
         filled, filled_uv = _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters,
                                             float(max_aspect))
-        laid = _layout(filled, filled_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
+        laid = layout(filled, filled_uv)
         if filled is not chart and int(chart.max()) + 1 <= NOTCH_CHOICE_CHARTS:
-            plain = _layout(chart, corner_uv, F, t.n_vertices, int(texture_size), int(margin_texels))
+            plain = layout(chart, corner_uv)
             if plain[-1] > laid[-1]:
                 filled, filled_uv, laid = chart, corner_uv, plain
         chart, corner_uv = filled, filled_uv
@@ -351,8 +355,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 chart2, corner_uv2 = _notches_filled(V, F, nbr, chart2, corner_uv2, en, solver,
                                                      max_iters, float(max_aspect))
                 try:
-                    laid2 = _layout(chart2, corner_uv2, F, t.n_vertices, int(texture_size),
-                                    int(margin_texels))
+                    laid2 = layout(chart2, corner_uv2)
                 except SolverError:               # the cuts' charts do not fit: keep the
                     laid2 = None                  # layout that does (a held-out torus: 8
                 if laid2 is not None and laid2[-1] > laid[-1]:   # charts fit, 12 did not)

@@ -8,6 +8,7 @@ from scipy.sparse.csgraph import connected_components, minimum_spanning_tree, sh
 from scipy.spatial import cKDTree
 
 from ..errors import PointCloudError
+from ..triangles import polygon_area
 from .defaults import GAP, K_DETECT
 from .graph import PointGraph, global_frame, knn_gaps
 
@@ -76,7 +77,7 @@ def detect_boundary(points, graph: PointGraph | None = None, *, gap: float = GAP
     # Anticlockwise about the global normal.
     g = global_frame(P)
     uv = (P[loop] - P[loop].mean(0)) @ g[:2].T
-    area = 0.5 * np.sum(uv[:, 0] * np.roll(uv[:, 1], -1) - np.roll(uv[:, 0], -1) * uv[:, 1])
+    area = polygon_area(uv)
     return loop if area > 0 else loop[::-1]
 
 

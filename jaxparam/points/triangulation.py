@@ -11,7 +11,7 @@ from scipy.spatial import Delaunay
 from .. import topology as topo
 from ..errors import PointCloudError
 from ..topology import half_edge_twins
-from ..triangles import corner_angle, face_angles, orient
+from ..triangles import corner_angle, face_angles, orient, polygon_area
 from .defaults import CHORD_ROUNDS, CHORD_TOL, EAR_MAX_BASE
 from .graph import PointGraph
 
@@ -54,7 +54,7 @@ def onto_chords(U: np.ndarray, bnd: np.ndarray, *, tol: float = CHORD_TOL) -> np
     that the map gives it its own place on the boundary."""
     N, b = U.shape[0], bnd.size
     B = np.asarray(U[bnd], np.float64)
-    mirror = 0.5 * np.sum(B[:, 0] * np.roll(B[:, 1], -1) - np.roll(B[:, 0], -1) * B[:, 1]) < 0
+    mirror = polygon_area(B) < 0
     if mirror:                                     # a clockwise polygon (user's boundary order)
         U, B = U * [1.0, -1.0], B * [1.0, -1.0]
     c = B.mean(0)                                  # inside the convex polygon
