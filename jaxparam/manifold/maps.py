@@ -105,6 +105,17 @@ ROUNDS = 4
 #: held-out mesh has a stall longer than 18 levels, so their decimations are unchanged.
 STALL_LEVELS, STALL_SHARE, STALL_FAR, HUB_DEGREE = 32, 0.005, 8, 16
 
+#: A decimation that has no collapse left under its rules first tries the *tiny* rings, those
+#: holding under ``TINY_RING`` times the level's mean face area, with the shape rules dropped
+#: (a face's tilt, its largest corner, the widest wedge; the curvature bound, the link condition
+#: and the flattened ring's positive triangles kept), before it relaxes the area cap or the
+#: rules for every ring.  A dense input made of flat pieces (cow refined twice by midpoint
+#: splits, 88k faces) kept clusters of tiny faces at its creases and tips, where no collapse
+#: passes the shape rules, until the last levels: 70 of its 100 base faces held under 1 % of
+#: the mean base face's area, each of them 4^j remesh faces, and the level-4 remesh lay 2.6 %
+#: of the diagonal off (0.64 % with the tiny rings let go; benchmarks/README.md, session 29).
+TINY_RING = 0.1
+
 
 def _segment_ids(ptr: np.ndarray) -> np.ndarray:
     return np.repeat(np.arange(ptr.size - 1), np.diff(ptr))
@@ -187,9 +198,10 @@ class _Candidates:
     """:func:`_candidates` in two steps, so decimations with different area caps share the
     first: the collapses and their surviving wedges that pass every test but the cap (made
     here), then :meth:`under` an area cap (a test of each wedge, and-ed with the others: the
-    same result as testing it among them)."""
+    same result as testing it among them).  ``only`` ``None`` or ``(n,)`` bool: the vertices
+    whose collapses are tried (all when ``None``)."""
 
-    def __init__(self, L: _Level, V, Q, rules, scale2, top=1):
+    def __init__(self, L: _Level, V, Q, rules, scale2, top=1, only=None):
         n = L.deg.size
         u, w = L.row, L.nbr
         deg = L.deg
@@ -197,6 +209,8 @@ class _Candidates:
         prev = L.ptr[u] + (L.pos - 1) % np.maximum(deg[u], 1)
         apex0 = L.nbr[prev]                                       # r_{k-1}
         ok = (L.widest[u] < rules[3] * np.pi) & (L.log_a[u] <= rules[2]) & (deg[u] + deg[w] - 4 >= 3) & (deg[apex0] >= 4) & (deg[apex1] >= 4)
+        if only is not None:
+            ok &= only[u]
         heads = np.flatnonzero(ok)
         x = np.concatenate([V[w[heads]], np.ones((heads.size, 1))], 1)
         Qs = Q[u[heads]] + Q[w[heads]]
@@ -525,7 +539,19 @@ def decimate_caps(V: np.ndarray, F: np.ndarray, base_faces: int, caps, *, verbos
                     heads, cost = shared[level_rules, top].under(area)
                     if heads.size:
                         break
-                if not heads.size:                 # no collapse: relax the cap, or the rules
+                if not heads.size and level_rules < len(_RULES) - 1:
+                    # Before the cap or the rules are relaxed for every ring: the tiny rings,
+                    # with the shape rules dropped (see TINY_RING).
+                    if ("tiny", level_rules) not in shared:
+                        tiny = L.ring_area < TINY_RING * L.ring_area.sum() / (3 * L.slots.size)
+                        rules = (-0.999, -2.0, _RULES[level_rules][2], np.inf)
+                        shared["tiny", level_rules] = _Candidates(L, V, run.Q, rules, scale2, None, tiny)
+                    heads, cost = shared["tiny", level_rules].under(area)
+                chosen = heads[:0]
+                if heads.size:                     # (hubs, when shared, may leave none)
+                    hubs = L.deg >= HUB_DEGREE if stall < 0 else None
+                    chosen = _independent(L, heads, cost, (run.faces_left - base_faces) // 2, hubs)
+                if not chosen.size:                # no collapse: relax the cap, or the rules
                     if 0 <= cap_step < doublings:
                         mb[4] += 1
                     elif level_rules + 1 < _CAPPED_RULES:
@@ -543,8 +569,6 @@ def decimate_caps(V: np.ndarray, F: np.ndarray, base_faces: int, caps, *, verbos
                         continue
                     picks.setdefault(None, (None, []))[1].append(mb)
                     continue
-                hubs = L.deg >= HUB_DEGREE if stall < 0 else None
-                chosen = _independent(L, heads, cost, (run.faces_left - base_faces) // 2, hubs)
                 if stall >= 0:                     # -1: stalled before, hubs shared since
                     slow = (2 * chosen.size < STALL_SHARE * run.faces_left
                             and run.faces_left > STALL_FAR * base_faces)
