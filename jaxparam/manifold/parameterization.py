@@ -19,7 +19,8 @@ from ..triangles import barycentric, locate
 from .charts import REFERENCE, ChartSystem, chart_values, charts, surface_triangles
 from .decimate import decimate
 from .finish import finished, lift_with, stretches
-from .maps import AREA_CAPS, decimate_caps, decision_positions
+from .maps import AREA_CAPS, decimate_caps
+from .noise import decision_positions
 from .overlay import base_charts, draw_faces, unfolding
 from .relax import (FINEST_ITERATIONS, GRID_MAX_POINTS, BaseDomain, GridLift, estimated_distance,
                     relax_samples, sharpest_vertices)
