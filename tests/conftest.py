@@ -43,3 +43,28 @@ def planar_mesh():
 @pytest.fixture(scope="session")
 def single_triangle():
     return jp.TriMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+
+
+# Closed meshes' maps, each made once for the tests that only read them (a manifold_map takes
+# 3-8 s on the 2-core box; session 29).
+@pytest.fixture(scope="session")
+def torus_map():
+    """``(mesh, base, param)``: torus(32, 16) over 40 base faces by the default route (MAPS)."""
+    mesh = jp.shapes.torus(32, 16)
+    return (mesh, *jp.manifold_map(mesh, 40, verbose=False))
+
+
+@pytest.fixture(scope="session")
+def plate_map():
+    """``(mesh, base, param)``: test_manifold_maps.plate(2), genus 2, at its fewest 38 base faces."""
+    from test_manifold_maps import plate
+    mesh = plate(2)
+    return (mesh, *jp.manifold_map(mesh, 38, verbose=False))
+
+
+@pytest.fixture(scope="session")
+def torus_paths_map():
+    """``(mesh, base, param)``: torus(40, 20) over 40 base faces by ``method="paths"``, the
+    route whose charts tile the base triangles and are re-solved by ``with_vertices``."""
+    mesh = jp.shapes.torus(40, 20)
+    return (mesh, *jp.manifold_map(mesh, 40, method="paths"))

@@ -19,10 +19,8 @@ def signed_volume(V, F):
 
 
 @pytest.fixture(scope="module")
-def torus():
-    mesh = jp.shapes.torus(40, 20)
-    base, param = manifold_map(mesh, 40, method="paths")    # charts that tile the base triangles
-    return mesh, base, param
+def torus(torus_paths_map):
+    return torus_paths_map          # conftest's torus(40, 20), 40 base faces, method="paths"
 
 
 def test_decimation_keeps_genus_orientation_and_original_vertices():
@@ -162,6 +160,10 @@ def test_cli_manifold_remeshes_every_component(tmp_path):
                                atol=1e-12)
 
 
+# (with the slow tests since session 29: the always-on test below runs the same command on a
+# smaller torus, 24 base faces, and checks its report's genus and seconds, the written
+# genus and the odd count's refusal, as this one does)
+@pytest.mark.slow
 def test_cli_manifold_on_a_generated_torus(tmp_path):
     src, out, rep = tmp_path / "torus.obj", tmp_path / "semi.obj", tmp_path / "r.json"
     jp.save(src, jp.shapes.torus(40, 20))
@@ -202,7 +204,10 @@ def test_cli_manifold_counts_folded_faces_in_its_report_and_its_line(tmp_path, c
     semi = jp.load(out)
     want = report.folded_faces(np.asarray(semi.vertices), np.asarray(semi.faces),
                                np.asarray(torus.vertices), np.asarray(torus.faces))
-    assert json.loads(rep.read_text())["folded"] == want
+    r = json.loads(rep.read_text())
+    assert r["folded"] == want and r["faces"] == 24 * 4 and r["genus"] == 1
+    assert set(r["seconds"]) == {"load", "parameterize", "remesh"} and semi.topology.genus == 1
+    assert main(["manifold", str(src), "-o", str(out), "--base-faces", "21"]) == 3     # odd count
     capsys.readouterr()
     monkeypatch.setattr(report, "folded_faces", lambda *a: 5)
     assert main(["manifold", str(src), "-o", str(out), "--base-faces", "24", "--levels", "1"]) == 0

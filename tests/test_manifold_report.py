@@ -6,26 +6,22 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-import jaxparam as jp
-from jaxparam.manifold import manifold_map
 from jaxparam.manifold.overlay import _drawn_in, base_charts, unfolding
 from jaxparam.manifold.report import fidelity, map_pieces_turned_over, misplaced_vertices
 from jaxparam.triangles import doubled_areas
-from test_manifold_maps import plate
 
 
 @pytest.fixture(scope="module")
-def torus():
-    mesh = jp.shapes.torus(32, 16)
-    return mesh, manifold_map(mesh, 40, verbose=False)[1]
+def torus(torus_map):
+    return torus_map[0], torus_map[2]          # conftest's torus(32, 16) at 40 base faces
 
 
 @pytest.fixture(scope="module")
-def genus_two():
+def genus_two(plate_map):
     """A genus-2 plate at 38 base faces: its straight drawing turns faces over from the first
-    corner's chart (45 of 432 faces, measured) and fewer from the chart chosen (29)."""
-    mesh = plate(2)
-    return mesh, manifold_map(mesh, 38, verbose=False)[1]
+    corner's chart (45 of 432 faces, measured) and fewer from the chart chosen (29).
+    conftest's map, shared with test_manifold_maps."""
+    return plate_map[0], plate_map[2]
 
 
 def test_no_piece_of_the_map_turns_over_and_every_vertex_is_in_place(torus):
