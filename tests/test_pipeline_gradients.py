@@ -252,14 +252,16 @@ def test_compress_gradient_with_the_mask_held(wavelet):
 
 def test_the_whole_pipeline_is_differentiable():
     # vertices -> convex_map -> remesh -> compress -> loss: every step's derivative composed.
+    # (Two levels since session 29: three compiled about a fifth more eager kernels, 454
+    # against 376, for the same chain; the always-on check of traced UVs through remesh.)
     mesh = jp.shapes.disk(5, seed=1, height=0.3)
     F, V0 = mesh.faces, generic(mesh)
-    n = jp.remesh(mesh, jp.convex_map(mesh), levels=3).mesh.n_vertices
+    n = jp.remesh(mesh, jp.convex_map(mesh), levels=2).mesh.n_vertices
     W = jnp.asarray(np.random.default_rng(5).normal(size=(n, 3)))
 
     def loss(V):
         m = jp.TriMesh(V, F)
-        semi = jp.remesh(m, jp.convex_map(m), levels=3)
+        semi = jp.remesh(m, jp.convex_map(m), levels=2)
         return jnp.sum(W * jp.wavelets.compress(semi, 0.2).mesh.vertices)
 
     assert_fd(loss, V0, jnp.asarray(np.random.default_rng(6).normal(size=V0.shape)), 1e-6, 1e-6)

@@ -103,7 +103,7 @@ def test_atlas_shows_its_stages(monkeypatch, capsys):
         return bar
 
     monkeypatch.setattr(prog, "progress", recording)          # StageBar's bar factory
-    mesh = jp.shapes.sphere(1)
+    mesh = jp.shapes.sphere(0)                                 # 2 charts, every stage
     jp.atlas(mesh, verbose=True)
     err = capsys.readouterr().err
     bar = made[0][1]
