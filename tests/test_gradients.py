@@ -483,8 +483,8 @@ def test_hand_written_weight_derivatives_match_jax_own():
         d, l, *ints)
 
     # compiled: eager dispatch of the fans' loops took 10-27 s (the values are compared
-    # bitwise, both sides compiled the same way)
-    for new, ref, args in ((wts._mean_value, plain_mv, (angle, prev, r)),
+    # bitwise, both sides compiled the same way; the mean-value pair too, 2 s eagerly)
+    for new, ref, args in ((jax.jit(wts._mean_value), jax.jit(plain_mv), (angle, prev, r)),
                            (jax.jit(new_sp), jax.jit(plain_sp),
                             (jnp.asarray(delta), jnp.asarray(lengths)))):
         out, vjp_new = jax.vjp(new, *args)
@@ -528,8 +528,10 @@ def test_fan_angle_derivative_matches_jax_own():
         b = d[nxt]
         return jnp.arctan2(safe_norm(jnp.cross(d, b)), jnp.sum(d * b, -1)), safe_norm(d)
 
-    new = lambda d: wts._fan_angles(d, nxt)      # noqa: E731
-    ref = lambda d: plain(d, nxt)                # noqa: E731
+    # compiled, both sides the same way (eagerly each primitive of the forward, the transposed
+    # and the tangent passes dispatched on its own: 3-4 s)
+    new = jax.jit(lambda d: wts._fan_angles(d, nxt))      # noqa: E731
+    ref = jax.jit(lambda d: plain(d, nxt))                # noqa: E731
     out, vjp_new = jax.vjp(new, d)
     out_ref, vjp_ref = jax.vjp(ref, d)
     for a, b in zip(out, out_ref):

@@ -179,13 +179,16 @@ def test_analytic_eigensystem_projection_matches_eigh(name):
     from jaxparam.optimize.newton import projected_sv_hessian, psd_project
     en = jp.energies.ENERGIES[name]
     rng = np.random.default_rng(3)
+    # (each side jitted, compiled once for the 5 Jacobians: eagerly 4-8 s for the first energy)
+    hessian = jax.jit(jax.hessian(lambda v: en.of_J(v.reshape(2, 2))))
+    project, closed_form = jax.jit(psd_project), jax.jit(lambda J: projected_sv_hessian(J, en.of_sv))
     for _ in range(5):
         J = rng.standard_normal((2, 2))
         if np.linalg.det(J) < 0:
             J[0] *= -1
-        H = jax.hessian(lambda v: en.of_J(v.reshape(2, 2)))(jnp.asarray(J.reshape(-1)))
-        ref = np.asarray(psd_project(H[None]))[0]
-        got = np.asarray(projected_sv_hessian(jnp.asarray(J), en.of_sv))
+        H = hessian(jnp.asarray(J.reshape(-1)))
+        ref = np.asarray(project(H[None]))[0]
+        got = np.asarray(closed_form(jnp.asarray(J)))
         np.testing.assert_allclose(got, ref, atol=1e-10 * np.abs(ref).max())
 
 

@@ -155,7 +155,10 @@ def test_grad_under_jit_and_vjp(symmetric, backend):
     assert abs(float(gv @ dv) - fd) <= 1e-6 * abs(fd)
 
 
-# PARDISO's two cases (10-15 s each) with the slow tests since session 27; SciPy's stay on
+# PARDISO's two cases (10-15 s each) with the slow tests since session 27; SciPy's stay on.
+# Each derivative is jitted (one compilation each, kept by the persistent cache): eagerly the
+# second-order transforms dispatched op by op, 8 s of SciPy's cases; the same custom_linear_solve
+# rules are transformed either way.
 @pytest.mark.parametrize(("symmetric", "backend"), [
     pytest.param(s, b, id=i, marks=pytest.mark.slow) if b == "pardiso" else pytest.param(s, b, id=i)
     for (s, b), i in zip(CASES, CASE_IDS)])
@@ -170,17 +173,18 @@ def test_second_derivatives_against_differences_of_the_gradient(symmetric, backe
     g = jax.grad(loss, argnums=(0, 1))
     du, db = direction(P, rng.standard_normal(v.shape), symmetric), rng.standard_normal(b.shape)
     # grad of grad: grad_z <g(z), d> = H d, against (g(z + h d) - g(z - h d)) / 2h
-    Hd = jax.grad(lambda vals, rhs: sum(jnp.vdot(gi, di) for gi, di in zip(g(vals, rhs), (du, db))),
-                  argnums=(0, 1))(v, b)
-    gp, gm = g(v + H * du, b + H * db), g(v - H * du, b - H * db)
+    Hd = jax.jit(jax.grad(lambda vals, rhs: sum(jnp.vdot(gi, di) for gi, di in zip(g(vals, rhs), (du, db))),
+                          argnums=(0, 1)))(v, b)
+    g_jit = jax.jit(g)
+    gp, gm = g_jit(v + H * du, b + H * db), g_jit(v - H * du, b - H * db)
     for i in range(2):
         assert rel_err(Hd[i], (np.asarray(gp[i]) - np.asarray(gm[i])) / (2 * H)) < 1e-5
     # mixed modes: forward-over-reverse (jax.hessian) == reverse-over-reverse
-    Hv_fr = jax.hessian(loss)(v, b)
-    Hv_rr = jax.jacrev(jax.grad(loss))(v, b)
+    Hv_fr = jax.jit(jax.hessian(loss))(v, b)
+    Hv_rr = jax.jit(jax.jacrev(jax.grad(loss)))(v, b)
     np.testing.assert_allclose(Hv_fr, Hv_rr, rtol=0, atol=1e-10 * np.abs(Hv_rr).max())
     np.testing.assert_allclose(Hv_fr, Hv_fr.T, rtol=0, atol=1e-10 * np.abs(Hv_fr).max())
-    np.testing.assert_allclose(Hv_fr @ du, Hd[0] - jax.jacfwd(jax.grad(loss), argnums=1)(v, b) @ db,
+    np.testing.assert_allclose(Hv_fr @ du, Hd[0] - jax.jit(jax.jacfwd(jax.grad(loss), argnums=1))(v, b) @ db,
                                rtol=0, atol=1e-9 * np.abs(Hd[0]).max())
 
 
