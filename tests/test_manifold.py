@@ -84,7 +84,7 @@ def test_the_parameterization_and_its_remesh_survive_pytree_round_trips(torus):
     def lifted(p):
         return p.lift(param.vertex_face[:5], q).sum()
 
-    g = jax.grad(lifted)(param)
+    g = jax.jit(jax.grad(lifted))(param)       # (jitted: 3 s of eager dispatch; the same lift)
     assert isinstance(g, ManifoldParameterization)
     np.testing.assert_allclose(float(np.asarray(g.mesh.vertices).sum()), 3 * 5, rtol=1e-12)
     semi = param.remesh(1)
