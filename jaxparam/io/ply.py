@@ -173,7 +173,8 @@ def _ascii_fixed(rows, props):
             if j >= A.shape[1]:
                 return None
             k = A[0, j]
-            if not np.all(A[:, j] == k) or k < 0 or k != int(k) or j + 1 + int(k) > A.shape[1]:
+            if (not np.isfinite(k) or not np.all(A[:, j] == k) or k < 0 or k != int(k)
+                    or j + 1 + int(k) > A.shape[1]):
                 return None
             out[p], j = A[:, j + 1:j + 1 + int(k)], j + 1 + int(k)
     return out if j == A.shape[1] else None
