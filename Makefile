@@ -10,6 +10,11 @@
 #                     output stripped), then check what each one claims
 #   make docs      -> build the documentation site into site/ (mkdocs --strict)
 PYTHON ?= python3
+# Test processes (pytest-xdist, in the test extra): 2 for CI's 2 cores; `make test JOBS=1` runs
+# the suite in one process. Tests are handed out by file, so a module's shared compilations
+# stay in one process.
+JOBS ?= 2
+XDIST = $(if $(filter 1,$(JOBS)),,-n $(JOBS))
 VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
@@ -28,14 +33,14 @@ demo: venv
 	$(PY) -m jaxparam.demo --out out
 
 test: venv
-	$(PY) -m pytest -q -p no:cacheprovider -m "not slow" tests
-	$(PY) -m pytest -q -p no:cacheprovider -m slow tests/test_notebooks.py
+	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) $(if $(XDIST),--dist loadfile) -m "not slow" tests
+	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) -m slow tests/test_notebooks.py
 
 test-all: venv
-	$(PY) -m pytest -q -p no:cacheprovider tests
+	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) $(if $(XDIST),--dist loadfile) tests
 
 test-fast: venv
-	$(PY) -m pytest -q -p no:cacheprovider -m "not slow" tests
+	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) $(if $(XDIST),--dist loadfile) -m "not slow" tests
 
 notebooks: venv
 	$(PIP) install --quiet -e ".[notebooks]"
