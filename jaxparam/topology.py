@@ -350,7 +350,6 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     a = F.reshape(-1)
     b = F[:, [1, 2, 0]].reshape(-1)
     c = F[:, [2, 0, 1]].reshape(-1)
-    hf = np.repeat(np.arange(m), 3)
 
     # One sort by undirected edge: a half-edge and its twin end up side by side.
     H = a.size
@@ -358,11 +357,14 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     ukey = lo * np.int64(n) + hi
     order = np.argsort(ukey, kind="stable")   # faster than the default here (runs of sorted keys)
     us = ukey[order]
+    backward = (a > b)[order]                 # each sorted half-edge runs hi -> lo
     same_next = us[1:] == us[:-1]
     pair = np.flatnonzero(same_next)
+    # twins run opposite ways: two half-edges of one edge both backward (or both forward) are
+    # two faces running the same way
+    if (pair.size > 1 and np.any(same_next[1:] & same_next[:-1])) or np.any(backward[pair] == backward[pair + 1]):
+        _raise_edge_error(a, b, np.repeat(np.arange(m), 3), n, where)
     h1, h2 = order[pair], order[pair + 1]
-    if (pair.size > 1 and np.any(same_next[1:] & same_next[:-1])) or np.any(a[h1] == a[h2]):
-        _raise_edge_error(a, b, hf, n, where)
     twin = np.full(H, -1, np.int64)
     twin[h1] = h2
     twin[h2] = h1
@@ -375,13 +377,14 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     ukeys = us[first]
     edges = np.stack([ukeys // n, ukeys % n], axis=1)
     ne = edges.shape[0]
-    edge_faces = np.full((ne, 2), -1, np.int64)
-    edge_faces[edge_of, (a[order] > b[order]).astype(np.int64)] = hf[order]
+    edge_faces = np.full(2 * ne, -1, np.int64)
+    edge_faces[2 * edge_of + backward] = order // 3       # half-edge 3 f + c lies in face f
+    edge_faces = edge_faces.reshape(ne, 2)
 
     # Wedges around each vertex: wedge w (at a[w], from b[w] to c[w]) is followed by the wedge
-    # that starts with the half-edge a[w] -> c[w], the twin of the face's half-edge c[w] -> a[w].
-    idx = np.arange(H)
-    succ = twin[idx - idx % 3 + (idx + 2) % 3]
+    # that starts with the half-edge a[w] -> c[w], the twin of the face's half-edge c[w] -> a[w]
+    # (half-edge 3 f + (c + 2) % 3).
+    succ = twin.reshape(-1, 3)[:, [2, 0, 1]].reshape(-1)
     pos, closed = _walk_fans(a, succ, n)
     wedge_count = np.bincount(a, minlength=n)
     covered = np.bincount(a[pos >= 0], minlength=n)
@@ -440,8 +443,7 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
     slot = np.full(n, -1, np.int64)
     slot[interior] = np.arange(interior.size)
     slot[boundary] = np.arange(boundary.size)
-    both = is_boundary[edges[:, 0]] & is_boundary[edges[:, 1]] & (edge_faces.min(axis=1) >= 0)
-    dividing = edges[both]
+    dividing = _dividing_edges(ring_ptr, ring_idx, boundary, is_boundary)
 
     return Topology(
         n_vertices=n, faces=F, edges=edges, edge_faces=edge_faces, boundary_loops=loops,
@@ -449,6 +451,25 @@ def build(faces, n_vertices: int | None = None, *, where: str = "TriMesh") -> To
         ring_row=ring_row, ring_wedge=ring_wedge, is_boundary=is_boundary, referenced=referenced, interior=interior,
         boundary=boundary, slot=slot, components=comp, n_components=n_comp, euler=int(euler),
         genus=int(genus), dividing_edges=dividing)
+
+
+def _dividing_edges(ring_ptr, ring_idx, boundary, is_boundary) -> np.ndarray:
+    """``(k, 2)``: the interior edges whose two ends lie on the boundary, sorted as ``edges``.
+
+    Read from the boundary vertices' one-rings alone: a boundary vertex's ring starts and ends
+    with its two boundary edges, so an entry strictly inside it that is a boundary vertex is
+    such an edge (kept once, from its smaller end)."""
+    if boundary.size == 0:
+        return np.zeros((0, 2), np.int64)
+    deg = ring_ptr[boundary + 1] - ring_ptr[boundary]
+    inner = np.maximum(deg - 2, 0)
+    v = np.repeat(boundary, inner)
+    at = np.repeat(ring_ptr[boundary] + 1 - np.cumsum(inner) + inner, inner) + np.arange(int(inner.sum()))
+    w = ring_idx[at]
+    keep = is_boundary[w] & (v < w)
+    v, w = v[keep], w[keep]
+    o = np.lexsort((w, v))
+    return np.stack([v[o], w[o]], axis=1)
 
 
 def half_edge_twins(F: np.ndarray, n: int) -> np.ndarray:
@@ -510,14 +531,15 @@ def renumber(t: Topology, new_id: np.ndarray) -> Topology:
     comp = np.where(ref, rank[np.maximum(comp, 0)], -1)
     loops = [new_id[l] for l in t.boundary_loops]
     loops.sort(key=lambda l: (-len(l), int(l.min())))
-    both = is_boundary[edges[:, 0]] & is_boundary[edges[:, 1]] & (ef.min(axis=1) >= 0)
+    ring_idx = new_id[t.ring_idx[src]]
     return Topology(
         n_vertices=n, faces=new_id[t.faces], edges=edges, edge_faces=ef, boundary_loops=tuple(loops),
-        ring_ptr=ring_ptr, ring_idx=new_id[t.ring_idx[src]], ring_prev=ren(t.ring_prev[src]),
+        ring_ptr=ring_ptr, ring_idx=ring_idx, ring_prev=ren(t.ring_prev[src]),
         ring_next=ren(t.ring_next[src]), ring_row=np.repeat(np.arange(n), np.diff(ring_ptr)),
         ring_wedge=t.ring_wedge[src], is_boundary=is_boundary, referenced=referenced,
         interior=interior, boundary=boundary, slot=slot, components=comp,
-        n_components=t.n_components, euler=t.euler, genus=t.genus, dividing_edges=edges[both])
+        n_components=t.n_components, euler=t.euler, genus=t.genus,
+        dividing_edges=_dividing_edges(ring_ptr, ring_idx, boundary, is_boundary))
 
 
 def _boundary_loops_from(ba: np.ndarray, bb: np.ndarray, n: int) -> tuple:

@@ -65,6 +65,34 @@ def test_dividing_edges():
     assert t.dividing_edges.tolist() == [[0, 2]]
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dividing_edges_and_edge_faces_match_their_definitions(seed):
+    """Read from the boundary rings and scattered by sorted position (not by a test over every
+    edge): checked against the definitions on a strip, whose every interior edge divides, and on
+    holed, shuffled grids, two components and an unreferenced vertex among them."""
+    rng = np.random.default_rng(seed)
+    grid = jp.shapes.plane_grid(9, 2 + seed).faces
+    hole = jp.shapes.plane_grid(8, 8).faces
+    hole = hole[~np.any(np.isin(hole, rng.choice(64, 3, replace=False)), axis=1)]
+    F = np.r_[grid, hole + grid.max() + 2]
+    F = F[rng.permutation(len(F))][:, np.roll([0, 1, 2], seed)]
+    try:
+        t = T.build(F)
+    except NonManifoldError:     # a removed vertex left a bowtie: take the grid alone
+        t = T.build(grid)
+        F = grid
+    n_faces = np.zeros(t.n_edges, int)
+    for f, (i, j, k) in enumerate(t.faces):
+        for u, v in ((i, j), (j, k), (k, i)):
+            e = np.flatnonzero((t.edges[:, 0] == min(u, v)) & (t.edges[:, 1] == max(u, v)))[0]
+            assert t.edge_faces[e, int(u > v)] == f        # side 0: the face running lo -> hi
+            n_faces[e] += 1
+    assert np.array_equal((t.edge_faces >= 0).sum(axis=1), n_faces)
+    want = t.edges[t.is_boundary[t.edges[:, 0]] & t.is_boundary[t.edges[:, 1]] & (n_faces == 2)]
+    assert len(want) > 0
+    np.testing.assert_array_equal(t.dividing_edges, want)
+
+
 def test_components_and_unreferenced():
     F = np.array([[0, 1, 2], [3, 4, 5]])
     t = T.build(F, 7)
