@@ -1,7 +1,7 @@
 # Two set-up commands that work on a fresh machine with only Python 3.11:
 #   make demo   -> .venv, install, flatten a generated mesh, results in out/
 #   make test   -> .venv, install with test extras, run the suite CI runs: every test not marked
-#                  slow, then every notebook executed and its claims checked
+#                  slow and every notebook executed and its claims checked
 # and, once set up:
 #   make test-all  -> everything, the tests marked slow included (the gradient grid, the sweeps
 #                     over ../shared/data, every notebook executed, the README examples run)
@@ -33,8 +33,8 @@ demo: venv
 	$(PY) -m jaxparam.demo --out out
 
 test: venv
-	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) $(if $(XDIST),--dist loadfile) -m "not slow" tests
-	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) -m slow tests/test_notebooks.py
+	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) $(if $(XDIST),--dist loadfile) \
+		-m "not slow or notebook" tests
 
 test-all: venv
 	$(PY) -m pytest -q -p no:cacheprovider $(XDIST) $(if $(XDIST),--dist loadfile) tests

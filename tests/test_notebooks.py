@@ -203,6 +203,7 @@ def test_the_time_limit_stops_a_notebook(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.notebook
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_runs(path, tmp_path):
     (tmp_path / "out").mkdir()
