@@ -61,10 +61,17 @@ def _layout(chart, corner_uv, F, n, texture_size, margin_texels):
 
 def _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters, *, max_new, accept):
     """Cut charts into more convex pieces (:func:`~jaxparam.atlas.compact.plan_splits`) and
-    minimize every piece again from its parent's map, in one problem.  A parent's cuts are
+    minimize every piece again from its parent's map (:func:`_pieces_minimized`).
+    **Returns:** ``(chart, corner_uv, new charts)``."""
+    new, parent = cp.plan_splits(corner_uv, F, chart, adj_csr, max_new=max_new, accept=accept)
+    return _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters)
+
+
+def _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters):
+    """The cut charts' pieces (``new (m,)`` labels, ``parent`` each label's chart before the
+    cuts) minimized again from their parent's map, in one problem.  A parent's cuts are
     undone when one of its pieces' maps flips, crosses itself, raises the energy or the
     largest ``s1/s2`` of the parent.  **Returns:** ``(chart, corner_uv, new charts)``."""
-    new, parent = cp.plan_splits(corner_uv, F, chart, adj_csr, max_new=max_new, accept=accept)
     k0 = int(chart.max()) + 1
     if parent.size == k0:
         return chart, corner_uv, 0
@@ -89,6 +96,70 @@ def _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters, *, max_new,
     corner_uv[todo[keep]] = uv[cm.mesh.faces[keep]]
     made = int(np.unique(chart).size) - k0
     return ch.relabel(chart), corner_uv, made
+
+
+#: A one-chart atlas covering under this share of the square is also tried cut in two by a
+#: straight line (:func:`~jaxparam.atlas.compact.straight_cuts`): each cut ranked by a packing
+#: of its two pieces at ``LONE_CUT_TEXELS`` texels a side, the best minimized again and kept
+#: when it packs tighter.  A lone chart's outline cannot fill a square (snail's, convex to
+#: 1.3 %, filled 62.6 %), and xatlas makes two charts of it there (session 31).
+LONE_CUT_BELOW = 0.75
+LONE_CUT_TEXELS = 128
+#: How many of the cuts, the best by :func:`_two_rectangles_fill`, are packed.
+LONE_CUT_PACKED = 24
+
+
+def _two_rectangles_fill(corner_uv, sides) -> np.ndarray:
+    """``(c,)``: for each cut ``sides (c, f)``, the share of the smallest square holding its
+    two pieces' bounding rectangles (the least-area of 16 directions, 11.25 degrees apart;
+    side by side or one above the other, each turned or not) that the pieces' UV area fills."""
+    th = np.arange(16) * np.pi / 16
+    D = np.stack([np.cos(th), np.sin(th)])                             # (2, 16)
+    proj = corner_uv @ D                                               # (f, 3, 16)
+    hi, lo = proj.max(1), proj.min(1)                                  # (f, 16)
+    e1, e2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
+    fa = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    out = np.zeros(len(sides))
+    for i, side in enumerate(sides):
+        dims = []
+        for piece in (side, ~side):
+            ext = hi[piece].max(0) - lo[piece].min(0)                  # (16,) widths
+            other = np.roll(ext, -8)                                   # the perpendicular's
+            j = int(np.argmin(ext * other))
+            dims.append((ext[j], other[j]))
+        (w1, h1), (w2, h2) = dims
+        side_len = min(min(max(a + c, max(b, d)), max(max(a, c), b + d))
+                       for a, b in ((w1, h1), (h1, w1)) for c, d in ((w2, h2), (h2, w2)))
+        out[i] = fa.sum() / max(side_len * side_len, 1e-300)
+    return out
+
+
+def _lone_cut(V, F, corner_uv, adj_csr, en, solver, max_iters):
+    """A one-chart atlas's chart cut in two (:data:`LONE_CUT_BELOW`): ``(chart, corner_uv)``,
+    or ``None`` when no cut is a pair of disks or the pieces' maps fail."""
+    best, n, packed = None, int(F.max()) + 1, 0
+    sides = cp.straight_cuts(corner_uv)
+    # the first few cuts into two disks, by how well their pieces' bounding rectangles fill
+    # a square, go to a packing
+    for i in np.argsort(-_two_rectangles_fill(corner_uv, sides), kind="stable"):
+        side = sides[i]
+        if packed == LONE_CUT_PACKED:
+            break
+        if not cp.two_disks(side, F, adj_csr):
+            continue
+        packed += 1
+        try:
+            score = _layout(side.astype(np.int64), corner_uv, F, n, LONE_CUT_TEXELS, 1)[-1]
+        except SolverError:
+            continue
+        if best is None or score > best[0]:
+            best = (score, side)
+    if best is None:
+        return None
+    chart = np.zeros(F.shape[0], np.int64)
+    cut, cuv, made = _pieces_minimized(V, F, chart, corner_uv, best[1].astype(np.int64),
+                                       np.array([0, 0]), en, solver, max_iters)
+    return (cut, cuv) if made else None
 
 
 def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspect):
@@ -194,7 +265,10 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       88, 61.6 -> 72.1 %; cow 110 -> 146 (xatlas 107), 67.6 -> 71.7 %; E_sd and max
       ``s1/s2`` never higher; the atlas takes 1.1-3x the time.  Not above
       :data:`COMPACT_CHARTS` charts, nor under :data:`COMPACT_MIN_FACES` faces a chart (a
-      noisy mesh's), where the cuts gain nothing.
+      noisy mesh's), where the cuts gain nothing.  An atlas of one chart covering under
+      :data:`LONE_CUT_BELOW` of the square is tried cut in two by a straight line instead,
+      the cut ranked by a packing of its pieces, and kept when they pack tighter (snail:
+      62.6 -> 75.2 % covered with two charts, as xatlas makes; a flat 4 x 1 strip 32 -> 99 %).
     - ``start``: each chart's start, ``"conformal"`` (the default: its least-squares
       conformal map, :mod:`~jaxparam.atlas.lscm`, or its convex-combination map where that
       inverts a triangle) or ``"convex"`` (the convex-combination map, boundary on a
@@ -360,6 +434,13 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                     laid2 = None                  # layout that does (a held-out torus: 8
                 if laid2 is not None and laid2[-1] > laid[-1]:   # charts fit, 12 did not)
                     chart, laid = chart2, laid2
+            if (int(chart.max()) == 0 and laid[-1] < LONE_CUT_BELOW
+                    and F.shape[0] >= 2 * COMPACT_MIN_FACES):
+                cut = _lone_cut(V, F, corner_uv, adj_csr, en, solver, max_iters)
+                if cut is not None:
+                    laid2 = layout(*cut)
+                    if laid2[-1] > laid[-1]:
+                        chart, laid = cut[0], laid2
             mark("compact")
     finally:
         mark.close()

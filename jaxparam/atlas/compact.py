@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from .charts import faces_are_disk
 from .pack import boundary_segments, min_area_rotation
 
-__all__ = ["hull_area", "hull_areas", "chart_rim", "best_cut", "plan_splits"]
+__all__ = ["hull_area", "hull_areas", "chart_rim", "best_cut", "straight_cuts", "two_disks", "plan_splits"]
 
 #: Cut directions (radians, in the chart's minimal-area-rectangle frame) and positions
 #: (quantiles of the face centroids' coordinate along the direction).
@@ -176,6 +176,35 @@ def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
                 and faces_are_disk(faces[side]) and faces_are_disk(faces[~side])):
             return H0 * (1.0 - s), side
     return 0.0, None
+
+
+#: :func:`straight_cuts`' positions along each direction (quantiles of the face centroids).
+CUT_QUANTILES = np.linspace(0.1, 0.9, 9)
+
+
+def straight_cuts(corner_uv: np.ndarray, *, min_faces: int = 2) -> np.ndarray:
+    """The straight cuts of one flattened chart ``corner_uv (f, 3, 2)`` along
+    :data:`DIRECTIONS` (in the frame of the chart's minimal-area rectangle) at
+    :data:`CUT_QUANTILES`: ``(c, f) bool``, each row the faces whose UV centroid lies before
+    the line, both sides at least ``min_faces`` faces.  Whether the pieces are disks is
+    :func:`two_disks`' to say."""
+    Q = corner_uv @ min_area_rotation(corner_uv.reshape(-1, 2)).T
+    C = Q.mean(1)
+    out = []
+    for th in DIRECTIONS:
+        x = C @ np.array([np.cos(th), np.sin(th)])
+        for t in np.unique(np.quantile(x, CUT_QUANTILES)):
+            side = x < t
+            if min_faces <= int(side.sum()) <= side.size - min_faces:
+                out.append(side)
+    return np.array(out, bool).reshape(-1, corner_uv.shape[0])
+
+
+def two_disks(side: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix) -> bool:
+    """Whether the cut ``side (f,) bool`` of a chart's faces ``faces (f, 3)`` (face adjacency
+    ``sub_adj``) leaves two face-connected disks."""
+    return bool(_connected(sub_adj, side) and _connected(sub_adj, ~side)
+                and faces_are_disk(faces[side]) and faces_are_disk(faces[~side]))
 
 
 def plan_splits(corner_uv: np.ndarray, faces: np.ndarray, chart: np.ndarray,
