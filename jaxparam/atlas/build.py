@@ -21,7 +21,7 @@ from . import flatten as fl
 from . import lscm
 from . import merge as mg
 from . import notches
-from .pack import pack_charts
+from .pack import min_area_rotation, pack_charts
 from .result import Atlas, atlas_stats
 
 __all__ = ["atlas"]
@@ -98,15 +98,19 @@ def _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters
     return ch.relabel(chart), corner_uv, made
 
 
-#: A one-chart atlas covering under this share of the square is also tried cut in two by a
-#: straight line (:func:`~jaxparam.atlas.compact.straight_cuts`): each cut ranked by a packing
-#: of its two pieces at ``LONE_CUT_TEXELS`` texels a side, the best minimized again and kept
-#: when it packs tighter.  A lone chart's outline cannot fill a square (snail's, convex to
-#: 1.3 %, filled 62.6 %), and xatlas makes two charts of it there (session 31).
-LONE_CUT_BELOW = 0.75
-LONE_CUT_TEXELS = 128
-#: How many of the cuts, the best by :func:`_two_rectangles_fill`, are packed.
-LONE_CUT_PACKED = 24
+#: An atlas of at most ``PACKING_CUT_CHARTS`` charts covering under ``PACKING_CUT_BELOW`` of
+#: the square also tries its widest chart (the largest minimal-area rectangle, the one that
+#: bounds the packing's scale) cut in two by a straight line
+#: (:func:`~jaxparam.atlas.compact.straight_cuts`): the ``PACKING_CUT_TRIED`` cuts into two
+#: disks whose pieces' rectangles fill a square best are packed with the other charts at
+#: ``PACKING_CUT_TEXELS`` texels a side, the best is minimized again and kept when it packs
+#: tighter.  A lone chart's outline cannot fill a square (snail's, convex to 1.3 %, filled
+#: 62.6 %; xatlas makes two charts of it), nor can a wide arc among a few (session 31).
+PACKING_CUT_BELOW = 0.75
+PACKING_CUT_CHARTS = 8
+PACKING_CUT_TEXELS = 128
+PACKING_CUT_TRIED = 24
+PACKING_CUT_ROUNDS = 2
 
 
 def _two_rectangles_fill(corner_uv, sides) -> np.ndarray:
@@ -134,31 +138,38 @@ def _two_rectangles_fill(corner_uv, sides) -> np.ndarray:
     return out
 
 
-def _lone_cut(V, F, corner_uv, adj_csr, en, solver, max_iters):
-    """A one-chart atlas's chart cut in two (:data:`LONE_CUT_BELOW`): ``(chart, corner_uv)``,
-    or ``None`` when no cut is a pair of disks or the pieces' maps fail."""
-    best, n, packed = None, int(F.max()) + 1, 0
-    sides = cp.straight_cuts(corner_uv)
+def _widest_cut(V, F, chart, corner_uv, adj_csr, en, solver, max_iters):
+    """The atlas's widest chart cut in two (:data:`PACKING_CUT_BELOW`): ``(chart,
+    corner_uv)``, or ``None`` when no cut is a pair of disks or the pieces' maps fail."""
+    k, n = int(chart.max()) + 1, int(F.max()) + 1
+    rect = []
+    for c in range(k):
+        P = corner_uv[chart == c].reshape(-1, 2)
+        rect.append(float(np.prod(np.ptp(P @ min_area_rotation(P).T, axis=0))))
+    fk = np.flatnonzero(chart == int(np.argmax(rect)))
+    sub = adj_csr[fk][:, fk]
+    sides = cp.straight_cuts(corner_uv[fk])
+    best, packed = None, 0
     # the first few cuts into two disks, by how well their pieces' bounding rectangles fill
-    # a square, go to a packing
-    for i in np.argsort(-_two_rectangles_fill(corner_uv, sides), kind="stable"):
-        side = sides[i]
-        if packed == LONE_CUT_PACKED:
+    # a square, go to a packing with the other charts
+    for i in np.argsort(-_two_rectangles_fill(corner_uv[fk], sides), kind="stable"):
+        if packed == PACKING_CUT_TRIED:
             break
-        if not cp.two_disks(side, F, adj_csr):
+        if not cp.two_disks(sides[i], F[fk], sub):
             continue
         packed += 1
+        new = chart.copy()
+        new[fk[sides[i]]] = k
         try:
-            score = _layout(side.astype(np.int64), corner_uv, F, n, LONE_CUT_TEXELS, 1)[-1]
+            score = _layout(new, corner_uv, F, n, PACKING_CUT_TEXELS, 1)[-1]
         except SolverError:
             continue
         if best is None or score > best[0]:
-            best = (score, side)
+            best = (score, new)
     if best is None:
         return None
-    chart = np.zeros(F.shape[0], np.int64)
-    cut, cuv, made = _pieces_minimized(V, F, chart, corner_uv, best[1].astype(np.int64),
-                                       np.array([0, 0]), en, solver, max_iters)
+    parent = np.r_[np.arange(k), chart[fk[0]]]
+    cut, cuv, made = _pieces_minimized(V, F, chart, corner_uv, best[1], parent, en, solver, max_iters)
     return (cut, cuv) if made else None
 
 
@@ -265,10 +276,11 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       88, 61.6 -> 72.1 %; cow 110 -> 146 (xatlas 107), 67.6 -> 71.7 %; E_sd and max
       ``s1/s2`` never higher; the atlas takes 1.1-3x the time.  Not above
       :data:`COMPACT_CHARTS` charts, nor under :data:`COMPACT_MIN_FACES` faces a chart (a
-      noisy mesh's), where the cuts gain nothing.  An atlas of one chart covering under
-      :data:`LONE_CUT_BELOW` of the square is tried cut in two by a straight line instead,
-      the cut ranked by a packing of its pieces, and kept when they pack tighter (snail:
-      62.6 -> 75.2 % covered with two charts, as xatlas makes; a flat 4 x 1 strip 32 -> 99 %).
+      noisy mesh's), where the cuts gain nothing.  An atlas of at most
+      :data:`PACKING_CUT_CHARTS` charts covering under :data:`PACKING_CUT_BELOW` of the
+      square then tries its widest chart cut in two by a straight line, the cut ranked by a
+      packing, and keeps it when the charts pack tighter (snail: one chart 62.6 -> two 75.2 %
+      covered, as xatlas makes two; a flat 4 x 1 strip 32 -> 99 %).
     - ``start``: each chart's start, ``"conformal"`` (the default: its least-squares
       conformal map, :mod:`~jaxparam.atlas.lscm`, or its convex-combination map where that
       inverts a triangle) or ``"convex"`` (the convex-combination map, boundary on a
@@ -433,14 +445,20 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 except SolverError:               # the cuts' charts do not fit: keep the
                     laid2 = None                  # layout that does (a held-out torus: 8
                 if laid2 is not None and laid2[-1] > laid[-1]:   # charts fit, 12 did not)
-                    chart, laid = chart2, laid2
-            if (int(chart.max()) == 0 and laid[-1] < LONE_CUT_BELOW
-                    and F.shape[0] >= 2 * COMPACT_MIN_FACES):
-                cut = _lone_cut(V, F, corner_uv, adj_csr, en, solver, max_iters)
-                if cut is not None:
-                    laid2 = layout(*cut)
-                    if laid2[-1] > laid[-1]:
-                        chart, laid = cut[0], laid2
+                    chart, corner_uv, laid = chart2, corner_uv2, laid2
+            for _ in range(PACKING_CUT_ROUNDS):
+                k = int(chart.max()) + 1
+                if not (k <= min(PACKING_CUT_CHARTS, COMPACT_CHARTS) and laid[-1] < PACKING_CUT_BELOW
+                        and F.shape[0] >= (k + 1) * COMPACT_MIN_FACES):
+                    break
+                cut = _widest_cut(V, F, chart, corner_uv, adj_csr, en, solver, max_iters)
+                try:
+                    laid2 = None if cut is None else layout(*cut)
+                except SolverError:               # the pieces do not fit at full size
+                    laid2 = None
+                if laid2 is None or laid2[-1] <= laid[-1]:
+                    break
+                chart, corner_uv, laid = cut[0], cut[1], laid2
             mark("compact")
     finally:
         mark.close()
