@@ -30,6 +30,8 @@ __all__ = ["hull_area", "hull_areas", "chart_rim", "best_cut", "straight_cuts", 
 #: (quantiles of the face centroids' coordinate along the direction).
 DIRECTIONS = np.arange(8) * np.pi / 8
 QUANTILES = np.linspace(0.1, 0.9, 17)
+#: :func:`straight_cuts`' default positions (the packing cut's, `atlas/build.py`).
+CUT_QUANTILES = np.linspace(0.1, 0.9, 9)
 
 #: Above this many distinct UV points in a chart, :func:`best_cut` measures each piece's hull
 #: with one Qhull call on the piece's outline points (about 0.1 ms each, whatever the size)
@@ -138,23 +140,13 @@ def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
     e1, e2 = Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]
     if 0.5 * np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])) > accept * H0:
         return 0.0, None
-    C = Q.mean(1)                                                    # (f, 2) centroids
-    cuts, sides = [], []
-    for th in DIRECTIONS:
-        x = C @ np.array([np.cos(th), np.sin(th)])
-        for t in np.unique(np.quantile(x, QUANTILES)):
-            side = x < t
-            k = int(side.sum())
-            if k < min_faces or side.size - k < min_faces:
-                continue
-            cuts.append((th, t))
-            sides.append(side)
+    S = straight_cuts(corner_uv, quantiles=QUANTILES, min_faces=min_faces, rotation=R)
+    cuts = range(len(S))
     cands = []
-    if cuts:
+    if len(S):
         # the pieces' points: the corners of their faces (each corner point once)
         pts, corner = np.unique(Q.reshape(-1, 2), axis=0, return_inverse=True)
         corner = corner.reshape(-1, 3)
-        S = np.array(sides)                                          # (c, f)
         members = np.zeros((2 * len(cuts), pts.shape[0]), bool)
         for piece, faces_in in enumerate(np.concatenate([S, ~S])):
             members[piece, corner[faces_in].ravel()] = True
@@ -166,34 +158,31 @@ def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
             areas = hull_areas(pts, members)
         else:
             areas = np.array([hull_area(pts[m]) for m in members])
-        for i, (th, t) in enumerate(cuts):
+        for i in cuts:
             s = (areas[i] + areas[len(cuts) + i]) / H0
             if s <= accept:
-                cands.append((s, th, t))
-    for s, th, t in sorted(cands):
-        side = C @ np.array([np.cos(th), np.sin(th)]) < t
-        if (_connected(sub_adj, side) and _connected(sub_adj, ~side)
-                and faces_are_disk(faces[side]) and faces_are_disk(faces[~side])):
-            return H0 * (1.0 - s), side
+                cands.append((s, i))
+    for s, i in sorted(cands):          # ties: the cuts' order (direction, then position)
+        if two_disks(S[i], faces, sub_adj):
+            return H0 * (1.0 - s), S[i]
     return 0.0, None
 
 
-#: :func:`straight_cuts`' positions along each direction (quantiles of the face centroids).
-CUT_QUANTILES = np.linspace(0.1, 0.9, 9)
-
-
-def straight_cuts(corner_uv: np.ndarray, *, min_faces: int = 2) -> np.ndarray:
+def straight_cuts(corner_uv: np.ndarray, *, quantiles=CUT_QUANTILES, min_faces: int = 2,
+                  rotation=None) -> np.ndarray:
     """The straight cuts of one flattened chart ``corner_uv (f, 3, 2)`` along
-    :data:`DIRECTIONS` (in the frame of the chart's minimal-area rectangle) at
-    :data:`CUT_QUANTILES`: ``(c, f) bool``, each row the faces whose UV centroid lies before
-    the line, both sides at least ``min_faces`` faces.  Whether the pieces are disks is
-    :func:`two_disks`' to say."""
-    Q = corner_uv @ min_area_rotation(corner_uv.reshape(-1, 2)).T
+    :data:`DIRECTIONS` (in the frame of the chart's minimal-area rectangle) at ``quantiles``
+    of the face centroids' coordinate: ``(c, f) bool``, each row the faces whose UV centroid
+    lies before the line, both sides at least ``min_faces`` faces, in the order direction,
+    then position.  Whether the pieces are disks is :func:`two_disks`' to say.  ``rotation``:
+    that frame's :func:`~jaxparam.atlas.pack.min_area_rotation`, when the caller has it."""
+    R = min_area_rotation(corner_uv.reshape(-1, 2)) if rotation is None else rotation
+    Q = corner_uv @ R.T
     C = Q.mean(1)
     out = []
     for th in DIRECTIONS:
         x = C @ np.array([np.cos(th), np.sin(th)])
-        for t in np.unique(np.quantile(x, CUT_QUANTILES)):
+        for t in np.unique(np.quantile(x, quantiles)):
             side = x < t
             if min_faces <= int(side.sum()) <= side.size - min_faces:
                 out.append(side)
