@@ -26,6 +26,7 @@ Usage::
     python benchmarks/atlas.py --no-xatlas ...       # jaxparam only
     python benchmarks/atlas.py --big --xatlas-cap 600  # stop xatlas after 600 s
     python benchmarks/atlas.py --compact 0 ...        # jaxparam without the chart cuts
+    python benchmarks/atlas.py --noise 0.2 cow.off     # vertex noise of 0.2 % of the diagonal
 
 xatlas is a benchmark-only extra (``pip install xatlas``); the engine never imports it.
 """
@@ -149,6 +150,16 @@ def chart_overlaps(uv, T, lab) -> int:
     return crossings + inside
 
 
+def noisy(mesh, percent: float, seed: int):
+    """``mesh`` with Gaussian vertex noise of RMS ``percent`` % of its bounding-box diagonal."""
+    import jaxparam as jp
+
+    V = np.asarray(mesh.vertices, np.float64)
+    d = float(np.linalg.norm(V.max(0) - V.min(0)))
+    rng = np.random.default_rng(seed)
+    return jp.TriMesh(V + rng.normal(scale=percent / 100 * d / np.sqrt(3), size=V.shape), mesh.faces)
+
+
 def run_jaxparam(mesh, **kw) -> dict:
     from jaxparam.atlas import atlas
 
@@ -202,6 +213,9 @@ def main(argv=None) -> None:
                     help="seconds after which xatlas is stopped (it can take hours at 1M faces)")
     ap.add_argument("--compact", type=float, default=None,
                     help="jp.atlas's compact (default: the library's)")
+    ap.add_argument("--noise", type=float, default=0.0,
+                    help="Gaussian vertex noise, RMS in %% of the bounding-box diagonal (a scan's)")
+    ap.add_argument("--seed", type=int, default=31, help="the noise's seed")
     ap.add_argument("--xatlas-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.xatlas_child:
@@ -211,6 +225,9 @@ def main(argv=None) -> None:
 
     names = args.meshes or sorted(p.name for p in DATA.iterdir())
     cases = [(nm, lambda nm=nm: jp.load(DATA / nm)) for nm in names]
+    if args.noise:
+        cases = [(f"{nm} + {args.noise:g} % noise", lambda make=make: noisy(make(), args.noise, args.seed))
+                 for nm, make in cases]
     if args.big:
         cases.append(("cow x256 (refined)", lambda: jp.shapes.refine(jp.load(DATA / "cow.off"), 4)))
     print("| mesh | faces | tool | charts | seam/sqrt(A) | E_sd (iso 2) | max s1/s2 | covered | "
