@@ -42,9 +42,10 @@ def _flatten_subset(V, F, chart, faces_idx, en, start, weights, solver, max_iter
     return uv[cm.mesh.faces], labels, q
 
 
-def _layout(chart, corner_uv, F, n, texture_size, margin_texels):
-    """One UV vertex per (chart, vertex), the charts packed: ``(uv_faces, vertex, uv_chart,
-    chart_uv, packing, uv, coverage)``."""
+def _layout(chart, corner_uv, F, n, texture_size, margin_texels, refine_steps: int = 6):
+    """One UV vertex per (chart, vertex), the charts packed (``refine_steps``: the packing's
+    bisection steps, :func:`~jaxparam.atlas.pack.pack_charts`): ``(uv_faces, vertex,
+    uv_chart, chart_uv, packing, uv, coverage)``."""
     key = np.repeat(chart, 3) * np.int64(n) + F.reshape(-1)
     uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
     uv_faces = inv.reshape(-1, 3).astype(np.int64)
@@ -55,7 +56,7 @@ def _layout(chart, corner_uv, F, n, texture_size, margin_texels):
     e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
     a_uv = 0.5 * float(np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
     packing = pack_charts(chart_uv, uv_faces, chart, uv_chart, a_uv, texture_size=texture_size,
-                          margin_texels=margin_texels)
+                          margin_texels=margin_texels, refine_steps=refine_steps)
     uv = np.clip(packing.apply(chart_uv, uv_chart), 0.0, 1.0)    # rounding at the borders
     return uv_faces, vertex, uv_chart, chart_uv, packing, uv, a_uv * packing.scale ** 2
 
@@ -115,11 +116,15 @@ def _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters
 #: bounds the packing's scale) cut in two by a straight line
 #: (:func:`~jaxparam.atlas.compact.straight_cuts`): the ``PACKING_CUT_TRIED`` cuts into two
 #: disks whose pieces' rectangles fill a square best are packed with the other charts at
-#: ``PACKING_CUT_TEXELS`` texels a side, the best is minimized again and kept when it packs
-#: tighter.  A lone chart's outline cannot fill a square (snail's, convex to 1.3 %, filled
-#: 62.6 %; xatlas makes two charts of it), nor can a wide arc among a few (session 31).
+#: ``PACKING_CUT_TEXELS`` texels a side (``PACKING_CUT_STEPS`` bisection steps), the best is
+#: minimized again and kept when it packs tighter.  A lone chart's outline cannot fill a
+#: square (snail's, convex to 1.3 %, filled 62.6 %; xatlas makes two charts of it), nor can
+#: a wide arc among a few (session 31).  Up to 16 charts since session 32 (bumpy: 16 charts,
+#: 64.3 -> 18 charts, 70.5 %, 3.6 -> 10.8 s; halftunnel 15, 66.9 % -> 16, 68.2 %; the other
+#: shared meshes have more charts or cover more), with 3 bisection steps for the candidates
+#: instead of 6 (bumpy 14.4 -> 10.8 s for the same atlas; halftunnel 69.2 -> 68.2 %).
 PACKING_CUT_BELOW = 0.75
-PACKING_CUT_CHARTS = 8
+PACKING_CUT_CHARTS = 16
 #: ... counting the charts that hold at least this share of the UV area: a noisy snail's
 #: three large charts came with 14 of a few faces each (splits of crumpled triangles), and
 #: its arc-shaped chart, uncut, left 43.6 % covered.
@@ -127,6 +132,7 @@ PACKING_CUT_SHARE = 0.01
 PACKING_CUT_TEXELS = 128
 PACKING_CUT_TRIED = 24
 PACKING_CUT_ROUNDS = 2
+PACKING_CUT_STEPS = 3
 
 
 def _large_charts(chart, corner_uv) -> int:
@@ -184,7 +190,7 @@ def _widest_cut(V, F, chart, corner_uv, adj_csr, en, solver, max_iters):
         new = chart.copy()
         new[fk[sides[i]]] = k
         try:
-            score = _layout(new, corner_uv, F, n, PACKING_CUT_TEXELS, 1)[-1]
+            score = _layout(new, corner_uv, F, n, PACKING_CUT_TEXELS, 1, PACKING_CUT_STEPS)[-1]
         except SolverError:
             continue
         if best is None or score > best[0]:
