@@ -29,9 +29,9 @@ import scipy.sparse as sp
 from ..errors import MeshError, TopologyError
 
 __all__ = ["face_adjacency", "face_normals", "grow_charts", "merge_charts", "make_disks",
-           "disk_flags", "split_chart", "relabel", "segment", "chart_edges", "faces_are_disk", "face_csr", "face_neighbours", "smooth_charts",
-           "smoothed_normals", "bumpy_share", "SMOOTH_ROUNDS", "NOISY_CHART_SHARE",
-           "NOISY_SIGN_SHARE"]
+           "disk_flags", "split_chart", "relabel", "segment", "chart_edges", "faces_are_disk",
+           "face_csr", "face_neighbours", "smooth_charts", "smoothed_normals", "bumpy_share",
+           "SMOOTH_ROUNDS", "NOISY_CHART_SHARE", "NOISY_SIGN_SHARE"]
 
 
 def _unique(x: np.ndarray) -> np.ndarray:
