@@ -3,6 +3,7 @@ small faces by tens of degrees, each tilted face left its chart, and a noisy mes
 into hundreds of charts.  Where the smoothed normals make at most half as many charts, the
 cones test them instead (``charts.segment(normals="auto")``); clean meshes keep their own."""
 import functools
+import json
 
 import numpy as np
 import pytest
@@ -104,3 +105,30 @@ def test_an_atlas_of_a_noisy_sphere_has_a_fifth_of_the_charts(spheres, monkeypat
     assert stats["auto"].charts <= 0.3 * stats["raw"].charts
     for s in stats.values():
         assert s.flips == 0 and s.overlaps == 0 and s.mirrored == 0
+
+
+def test_the_atlas_takes_the_normals_choice_and_refuses_others_before_any_work():
+    mesh = _noisy(jp.shapes.cylinder_patch(40, 20), 0.007, seed=0)
+    with pytest.raises(MeshError, match="atlas: normals must be 'auto', 'raw' or 'smoothed'"):
+        jp.atlas(mesh, normals="vertex", verbose=False)
+    charts = {n: jp.atlas(mesh, normals=n, compact=0, verbose=False).n_charts
+              for n in ("raw", "smoothed", "auto")}
+    assert charts["smoothed"] < charts["raw"]                     # measured 3 and 2
+    assert charts["auto"] == charts["smoothed"]                   # its bends tell the noise
+
+
+def test_cli_atlas_normals(tmp_path, capsys):
+    from jaxparam.cli import main
+
+    src = tmp_path / "noisy.obj"
+    jp.save(src, _noisy(jp.shapes.cylinder_patch(40, 20), 0.007, seed=0))
+    reports = {}
+    for n in ("raw", "smoothed"):
+        rep = tmp_path / f"{n}.json"
+        assert main(["-q", "atlas", str(src), "-o", str(tmp_path / f"{n}.obj"), "--normals", n,
+                     "--compact", "0", "--report", str(rep)]) == 0
+        reports[n] = json.loads(rep.read_text())
+    assert reports["smoothed"]["charts"] < reports["raw"]["charts"]
+    with pytest.raises(SystemExit):
+        main(["-q", "atlas", str(src), "-o", str(tmp_path / "x.obj"), "--normals", "vertex"])
+    assert "--normals" in capsys.readouterr().err

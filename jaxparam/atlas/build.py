@@ -265,7 +265,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
           max_splits: int = 16, merge_cone: float | None = None,
           small_merge_cone: float | None = None, post_merge_budget: float = 0.0,
           post_merge_cone: float = 100.0, post_merge_share: float = 0.05,
-          compact: float = 0.5, compact_accept: float = 0.9,
+          compact: float = 0.5, compact_accept: float = 0.9, normals: str = "auto",
           verbose: bool | None = None) -> Atlas:
     """A UV atlas of any manifold mesh: closed or open, any genus, several components.
 
@@ -281,6 +281,11 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
       normal while charts grow; ``merge_cone``: the same while charts merge (default
       ``cone``); ``small_merge_cone``: a second merge in which only charts under 1 % of
       the area merge into a neighbour, within this wider cone (``None``: none).
+    - ``normals``: the face normals the cones test: ``"raw"`` (each face's own),
+      ``"smoothed"`` (averaged with the neighbours', :func:`~jaxparam.atlas.charts.smoothed_normals`,
+      for a noisy mesh, whose tilted triangles would each start a chart) or ``"auto"`` (the
+      default: smoothed where the mesh is noisy, :func:`~jaxparam.atlas.charts.segment`;
+      every clean mesh of ``../shared/data`` keeps its own normals).
     - ``max_aspect``: a chart whose map has a triangle with ``s1/s2`` above this, or whose
       boundary crosses itself, is split in two and flattened again (at most ``max_splits``
       rounds; camel_b needs 10).  The default 3.5 splits only where the cone's charts
@@ -377,6 +382,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
     if small_merge_cone is not None and not 0 < small_merge_cone < 180:
         raise MeshError("atlas: small_merge_cone must be an angle in (0, 180) degrees or None, "
                         f"got {small_merge_cone}.")
+    if normals not in ("auto", "raw", "smoothed"):
+        raise MeshError(f"atlas: normals must be 'auto', 'raw' or 'smoothed', got {normals!r}.")
     if not (compact >= 0 and 0 < compact_accept < 1):
         raise MeshError(f"atlas: compact must be >= 0 and compact_accept in (0, 1); got {compact}, "
                         f"{compact_accept}.")
@@ -403,7 +410,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         V = np.asarray(mesh.vertices, np.float64)
         t = mesh.topology
         F = t.faces
-        chart = ch.segment(mesh, cone=cone, merge_cone=merge_cone, small_cone=small_merge_cone)
+        chart = ch.segment(mesh, cone=cone, merge_cone=merge_cone, small_cone=small_merge_cone,
+                           normals=normals)
         mark("charts")
         adj_csr = ch.face_csr(t)
         corner_uv = np.zeros((F.shape[0], 3, 2))

@@ -38,6 +38,9 @@ def add_atlas_parser(sub, command) -> None:
                  "from cutting concave charts so they pack tighter (0: none)", type=float)
     add_named(p, "--energy", sorted(ENERGIES), default_of(atlas, "energy"),
               "distortion energy each chart's map minimizes")
+    add_named(p, "--normals", ("auto", "raw", "smoothed"), default_of(atlas, "normals"),
+              "face normals the cones test: auto (smoothed where the mesh is found noisy), raw "
+              "(each face's own) or smoothed (for a noisy mesh, a scan)")
     add_named(p, "--start", ("conformal", "convex"), default_of(atlas, "start"),
               "each chart's start: its least-squares conformal map (the convex one where that "
               "folds) or its convex-combination map")
@@ -87,7 +90,7 @@ def cmd_atlas(args) -> int:
     try:
         a = atlas(mesh, energy=canonical(args.energy), texture_size=args.texture_size,
                   margin_texels=args.margin_texels, cone=args.cone, compact=args.compact,
-                  start=canonical(args.start))
+                  start=canonical(args.start), normals=canonical(args.normals))
     except (MeshError, SolverError) as exc:     # the messages name the Python options
         text = str(exc).replace("margin_texels", "--margin-texels").replace(
             "texture_size", "--texture-size")
