@@ -478,7 +478,8 @@ def _moved(F, chart, owner, vertex, dest, n, own):
     those in any other chart) given to chart ``dest[i]``; a face at two such vertices goes
     with the first in order."""
     slot = np.full(n, -1)
-    slot[vertex[::-1]] = np.arange(vertex.size)[::-1]             # each vertex's first entry
+    once, first_at = np.unique(vertex, return_index=True)
+    slot[once] = first_at                                          # each vertex's first entry
     corner_f = np.repeat(np.arange(F.shape[0]), 3)
     hit = slot[F.reshape(-1)] >= 0
     faces, which = corner_f[hit], slot[F.reshape(-1)[hit]]
@@ -512,9 +513,10 @@ def close_slits(topology, V: np.ndarray, chart: np.ndarray, *, limit: float = SL
         kc, kv, angle, wide = _wide_fans(topology, angles, after, limit)
         if wide.any():
             others = np.flatnonzero(~wide & np.isin(kv, kv[wide]))
-            others = others[np.argsort(angle[others], kind="stable")]
+            others = others[np.lexsort((angle[others], kv[others]))]
+            last = np.r_[kv[others][1:] != kv[others][:-1], True]   # each vertex's largest angle
             widest = np.full(n, -1)
-            widest[kv[others]] = kc[others]                        # the largest angle wins
+            widest[kv[others[last]]] = kc[others[last]]
             o = np.argsort(-angle[wide], kind="stable")
             c, v = kc[wide][o], kv[wide][o]
             ok = widest[v] >= 0
