@@ -131,12 +131,13 @@ def test_atlas_with_filled_notches_keeps_each_chart_at_its_optimum(monkeypatch):
 
 def test_few_charts_keep_the_layout_that_covers_more(monkeypatch):
     # Up to NOTCH_CHOICE_CHARTS charts both layouts are packed, with and without the ears
-    # moved, and the one covering more is kept: halftunnel lost 66.8 -> 63.1 % to the moves.
+    # moved, and the one covering more is kept: halftunnel lost 66.8 -> 63.1 % to the moves
+    # (session 26); since its crossing charts are peeled (session 32) both of its layouts
+    # cover 62.3 %.  sphere(3): 4 charts either way, 54.3 % with the moves, 55.6 % without.
     import importlib
 
-    from conftest import data_path
     B = importlib.import_module("jaxparam.atlas.build")
-    mesh = jp.load(data_path("meshes", "halftunnel.off"))
+    mesh = jp.shapes.sphere(3)
     covers = []
     real = B._layout
 
@@ -148,7 +149,7 @@ def test_few_charts_keep_the_layout_that_covers_more(monkeypatch):
     monkeypatch.setattr(B, "_layout", spy)
     chosen = jp.atlas(mesh, verbose=False)
     filled, plain = covers[:2]                          # the first two: before compaction
-    assert filled[0] <= B.NOTCH_CHOICE_CHARTS and filled[0] != plain[0]
+    assert filled[0] <= B.NOTCH_CHOICE_CHARTS and filled[1] != plain[1]
     assert chosen.stats.coverage >= max(filled[1], plain[1]) - 1e-12
     assert chosen.stats.coverage > filled[1]            # here the moves' layout loses
     assert chosen.stats.flips == 0 and chosen.stats.overlaps == 0 and chosen.stats.mirrored == 0
