@@ -11,6 +11,7 @@ import pytest
 import jaxparam as jp
 from jaxparam.atlas import charts as ch
 from jaxparam.errors import MeshError
+from jaxparam.triangles import face_angles
 
 
 def _noisy(mesh, share, seed):
@@ -90,7 +91,7 @@ def test_a_noisy_mesh_with_few_charts_is_told_by_its_bends():
 
 def test_corner_angles_sum_to_pi_per_face_and_to_a_full_turn_inside_a_plane():
     mesh = jp.shapes.plane_grid(6, 5, jitter=0.3, seed=2)
-    A = ch.corner_angles(np.asarray(mesh.vertices, float), mesh.faces)
+    A = face_angles(np.asarray(mesh.vertices, float), mesh.faces)
     np.testing.assert_allclose(A.sum(1), np.pi, rtol=1e-12)
     around = np.bincount(mesh.faces.reshape(-1), A.reshape(-1))
     inner = ~mesh.topology.is_boundary
@@ -100,7 +101,7 @@ def test_corner_angles_sum_to_pi_per_face_and_to_a_full_turn_inside_a_plane():
 def test_closing_slits_leaves_fewer_fans_over_a_full_turn_and_every_chart_a_disk(spheres):
     _, noisy = spheres
     t, V = noisy.topology, np.asarray(noisy.vertices)
-    A = ch.corner_angles(V, t.faces)
+    A = face_angles(V, t.faces)
 
     def wide(chart):
         kc, kv, angle, w = ch._wide_fans(t, A, chart, ch.SLIT_ANGLE)

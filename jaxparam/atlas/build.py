@@ -14,6 +14,7 @@ from ..disk import unstitched
 from ..errors import MeshError, SolverError, TopologyError
 from ..io import as_mesh
 from ..mesh import TriMesh
+from ..triangles import doubled_areas
 from ..clock import StageClock
 from ..progress import StageBar
 from . import charts as ch
@@ -168,8 +169,7 @@ PACKING_CUT_STEPS = 3
 
 def _large_charts(chart, corner_uv) -> int:
     """How many charts hold at least :data:`PACKING_CUT_SHARE` of the UV area."""
-    e1, e2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
-    area = np.bincount(chart, weights=np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
+    area = np.bincount(chart, weights=np.abs(doubled_areas(corner_uv)))
     return int(np.sum(area >= PACKING_CUT_SHARE * area.sum()))
 
 
@@ -181,8 +181,7 @@ def _two_rectangles_fill(corner_uv, sides) -> np.ndarray:
     D = np.stack([np.cos(th), np.sin(th)])                             # (2, 16)
     proj = corner_uv @ D                                               # (f, 3, 16)
     hi, lo = proj.max(1), proj.min(1)                                  # (f, 16)
-    e1, e2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
-    fa = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    fa = 0.5 * np.abs(doubled_areas(corner_uv))
     out = np.zeros(len(sides))
     for i, side in enumerate(sides):
         dims = []

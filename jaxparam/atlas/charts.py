@@ -27,12 +27,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import MeshError, TopologyError
+from ..host import vertex_normals
+from ..triangles import face_angles
 
 __all__ = ["face_adjacency", "face_normals", "grow_charts", "merge_charts", "make_disks",
            "disk_flags", "split_chart", "relabel", "segment", "chart_edges", "faces_are_disk",
            "face_csr", "face_neighbours", "smooth_charts", "smoothed_normals", "bumpy_share",
-           "SMOOTH_ROUNDS", "NOISY_CHART_SHARE", "NOISY_SIGN_SHARE", "SLIT_ANGLE",
-           "corner_angles", "close_slits"]
+           "SMOOTH_ROUNDS", "NOISY_CHART_SHARE", "NOISY_SIGN_SHARE", "SLIT_ANGLE", "close_slits"]
 
 
 def _unique(x: np.ndarray) -> np.ndarray:
@@ -415,15 +416,11 @@ def bumpy_share(topology, V: np.ndarray) -> float:
     umbrella vector (neighbours' mean minus the vertex) along the vertex normal (face normals
     summed by area) differs.  Ends bent by less than 1e-6 of the mean edge length count as
     flat and never differ (a plane's rounding).  Boundary vertices are left out."""
-    F, E = topology.faces, topology.edges
-    n = topology.n_vertices
+    E, n = topology.edges, topology.n_vertices
     ends, others = np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]]
     deg = np.maximum(np.bincount(ends, minlength=n), 1)
-    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    corners = F.reshape(-1)
     umbrella = np.stack([np.bincount(ends, V[others, x], n) / deg - V[:, x] for x in range(3)], 1)
-    vn = np.stack([np.bincount(corners, np.repeat(c[:, x], 3), n) for x in range(3)], 1)
-    h = np.einsum("ij,ij->i", umbrella, vn) / np.maximum(np.linalg.norm(vn, axis=1), 1e-300)
+    h = np.einsum("ij,ij->i", umbrella, vertex_normals(V, topology.faces))
     tol = 1e-6 * float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean()) if len(E) else 0.0
     side = np.where(np.abs(h) > tol, np.sign(h), 0.0)
     inner = ~topology.is_boundary
@@ -448,16 +445,6 @@ def smoothed_normals(normals, areas, adj_csr, rounds: int = SMOOTH_ROUNDS) -> np
 #: and its chart's map crossed its own boundary and was split in two.  On noisy meshes 12 of
 #: the 13 self-crossing charts of cow + 0.5 % noise had such a vertex (2.01-3.15 pi).
 SLIT_ANGLE = 2 * np.pi
-
-
-def corner_angles(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """``(m, 3)``: the 3D angle (radians) of each face at each of its corners."""
-    P = V[F]
-    out = []
-    for i in range(3):
-        u, w = P[:, (i + 1) % 3] - P[:, i], P[:, (i + 2) % 3] - P[:, i]
-        out.append(np.arctan2(np.linalg.norm(np.cross(u, w), axis=1), np.einsum("ij,ij->i", u, w)))
-    return np.stack(out, 1)
 
 
 def _wide_fans(topology, angles, chart, limit):
@@ -502,7 +489,7 @@ def close_slits(topology, V: np.ndarray, chart: np.ndarray, *, limit: float = SL
     the most angle there after it.  Moves that break a disk are undone
     (:func:`keep_disks`); ``rounds`` passes, widest fans first."""
     F, n = topology.faces, topology.n_vertices
-    angles = corner_angles(np.asarray(V, np.float64), F)
+    angles = face_angles(np.asarray(V, np.float64), F)
     for _ in range(rounds):
         kc, kv, angle, wide = _wide_fans(topology, angles, chart, limit)
         if not wide.any():
