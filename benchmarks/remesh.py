@@ -19,11 +19,13 @@ distance from the input, % of the diagonal (``Remesh.errors``).  Part 4 (``--def
 (``area_aware_map``: Newton and error-driven rounds up to 40k faces, reweighted convex maps
 above), the shape-preserving convex map and (above 40k) the Newton map the default was before
 session 9: seconds of the map and of the remesh, CPU seconds, level-6 Hausdorff and the load.
+Part 5 (``--large``): inputs above 40k faces (shared meshes refined, one perturbed, a generated
+relief), the reweighted map with and without its error-driven rounds, paired; only this part.
 
 Usage::
 
     python benchmarks/remesh.py [--refine 0 1 2] [--levels 5 6 7] [--plot rd.png]
-                                [--faithful] [--default-map] [--compress-all]
+                                [--faithful] [--default-map] [--compress-all] [--large]
 """
 from __future__ import annotations
 
@@ -52,6 +54,66 @@ def disk_meshes(folder: Path):
             yield path, mesh
 
 
+def relief(n: int = 161, seed: int = 5):
+    """A held-out disk of ``2 (n - 1)^2`` faces: a square grid lifted onto 40 narrow Gaussian
+    bumps (widths 1-5 % of the side) and a fine ripple, as a scanned relief."""
+    import jaxparam as jp
+    g = jp.shapes.plane_grid(n, n)
+    V = np.asarray(g.vertices, np.float64).copy()
+    rng = np.random.default_rng(seed)
+    cx, cy, w = rng.uniform(0, 1, 40), rng.uniform(0, 1, 40), rng.uniform(0.01, 0.05, 40)
+    r2 = (V[:, 0, None] - cx) ** 2 + (V[:, 1, None] - cy) ** 2
+    V[:, 2] = (0.08 * np.exp(-r2 / (2 * w ** 2))).sum(1) + 0.002 * np.sin(60 * V[:, 0]) * np.cos(50 * V[:, 1])
+    return jp.TriMesh(V, g.faces)
+
+
+def perturbed(mesh, scale: float = 0.15, seed: int = 7):
+    """``mesh`` with each vertex moved along its normal by ``scale`` x the mean edge x N(0, 1)."""
+    import jaxparam as jp
+    V, F = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces)
+    n = jp.host.vertex_normals(V, F, np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    edge = np.mean(np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1))
+    return jp.TriMesh(V + scale * edge * np.random.default_rng(seed).normal(size=(len(V), 1)) * n, F)
+
+
+def large_table(jp, samples: int) -> None:
+    """Above 40k faces, paired in one process: ``area_aware_map(mesh)`` (the reweighted map,
+    the default before session 33) against ``area_aware_map(mesh, levels=6)`` (what
+    ``jp.remesh(mesh, levels=6)`` takes now: its error-driven rounds up to 200k faces), and
+    the convex map: seconds of the map, the level-6 remesh's Hausdorff (% of the diagonal)."""
+    from jaxparam.distance import surface_distance
+    from jaxparam.remesh import area_aware_map
+    folder = DATA.parent
+    cases = [("camelhead x4", lambda: jp.shapes.refine(jp.load(DATA), 1)),
+             ("camelhead x4 perturbed", lambda: perturbed(jp.shapes.refine(jp.load(DATA), 1))),
+             ("camel_b x16", lambda: jp.shapes.refine(jp.load(folder / "camel_b.obj"), 2)),
+             ("lilium x16", lambda: jp.shapes.refine(jp.load(folder / "lilium.obj"), 2)),
+             ("snail x64", lambda: jp.shapes.refine(jp.load(folder / "snail.obj"), 3)),
+             ("bump-domain x16", lambda: jp.shapes.refine(jp.load(folder / "bump-domain.obj"), 2)),
+             ("relief (generated)", relief),
+             ("camelhead x16", lambda: jp.shapes.refine(jp.load(DATA), 2))]
+    print(f"\nabove 40k faces, level 6: the reweighted map alone / with its error-driven rounds / the "
+          f"convex map ({samples} samples per surface): map s, L6 Hausdorff %")
+    print(f"{'mesh':>24s} {'faces':>7s} {'reweighted s':>12s} {'H %':>6s} {'rounds s':>9s} {'H %':>6s} "
+          f"{'convex s':>9s} {'H %':>6s} {'load':>5s}")
+    for name, make in cases:
+        mesh = make()
+        V = np.asarray(mesh.vertices)
+        row = []
+        for f in (lambda: area_aware_map(mesh), lambda: area_aware_map(mesh, levels=6),
+                  lambda: jp.convex_map(mesh, boundary="circle")):
+            t = time.perf_counter()
+            uv = np.asarray(f())
+            sec = time.perf_counter() - t
+            semi = jp.remesh(mesh, uv, levels=6)
+            d = surface_distance(V, mesh.faces, np.asarray(semi.mesh.vertices), semi.mesh.faces,
+                                 samples=samples, seed=0)
+            row += [sec, 100 * d.hausdorff]
+        print(f"{name:>24s} {mesh.n_faces:7d} {row[0]:12.2f} {row[1]:6.3f} {row[2]:9.2f} {row[3]:6.3f} "
+              f"{row[4]:9.2f} {row[5]:6.3f} {os.getloadavg()[0]:5.1f}", flush=True)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--refine", type=int, nargs="*", default=[0, 1, 2])
@@ -60,10 +122,15 @@ def main() -> int:
     ap.add_argument("--faithful", action="store_true", help="errors of every disk mesh")
     ap.add_argument("--default-map", action="store_true", help="time the default map too")
     ap.add_argument("--samples", type=int, default=20_000, help="points per surface (errors)")
+    ap.add_argument("--large", action="store_true",
+                    help="above 40k faces: the reweighted map with and without its error-driven rounds")
     ap.add_argument("--compress-all", action="store_true",
                     help="5 %% compression errors over lazy's, every disk mesh")
     args = ap.parse_args()
     import jaxparam as jp
+    if args.large:                                  # part 5 alone
+        large_table(jp, args.samples)
+        return 0
     from jaxparam.remesh import (AREA_MAP_FULL_FACES, area_aware_map, area_map_iters, base_domain,
                                  measure_errors, refine_domain)
     from jaxparam.distance import surface_distance
@@ -111,7 +178,7 @@ def main() -> int:
             mesh = jp.shapes.refine(base, r) if r else base
             big = mesh.n_faces > AREA_MAP_FULL_FACES          # as jp.remesh's default
             maps = {"convex": lambda m: jp.convex_map(m, boundary="circle"),
-                    "default": lambda m: area_aware_map(m, levels=None if big else 6)}
+                    "default": lambda m: area_aware_map(m, levels=6)}
             if big:                                           # the session-8 default there
                 maps["newton"] = lambda m: area_aware_map(m, max_iters=area_map_iters(m.n_faces))
             for name, make in maps.items():

@@ -15,12 +15,10 @@ steps:
    barycentric coordinates.
 
 Without a given ``psi`` the map is :func:`area_aware_map`: Sander et al.'s L2 stretch (survey
-ref. [27]) minimized flip-free inside the unit circle, so the dyadic grid samples the surface
-by area instead of squeezing its far parts, then (up to 40k faces) reweighted where the remesh
-is still far from the input (:func:`level_errors`); above 40k faces Yoshizawa et al.'s
-reweighted convex maps instead (:mod:`jaxparam.stretch_map`: one Cholesky factorization a
-round, no Newton); ``errors=True`` measures each level's distance from the input
-(:class:`RemeshErrors`).
+ref. [27]) minimized flip-free inside the unit circle (above 40k faces Yoshizawa et al.'s
+reweighted convex maps, :mod:`jaxparam.stretch_map`), so the dyadic grid samples the surface
+by area, then (up to 200k faces) reweighted where the remesh is still far from the input
+(:func:`level_errors`); ``errors=True`` measures each level's distance (:class:`RemeshErrors`).
 
 Vertices are numbered level by level (``V^0 ⊂ V^1 ⊂ ... ⊂ V^j``), so the first ``n_l``
 vertices of the remesh are those of ``T^l``; the result, a :class:`Remesh`, carries the
@@ -55,7 +53,7 @@ from .optimize import Newton, Problem, StopRules, minimize
 from .subdivision import CHILDREN, Hierarchy, dyadic_hierarchy, dyadic_refine, hierarchy_from_faces  # noqa: F401
 from .triangles import barycentric, locate, signed_area2
 from .progress import progress
-from .stretch_map import reweighted_stretch_map
+from .stretch_map import STRETCH_MAP_ITERS, Reweighting, reweighted_stretch_map
 
 __all__ = ["Remesh", "RemeshErrors", "remesh", "check_remesh_input", "area_aware_map", "area_map_iters",
            "measure_errors",
@@ -423,12 +421,19 @@ AREA_MAP_ITERS = 25
 #: (at least :data:`AREA_MAP_MIN_ITERS`).
 AREA_MAP_FULL_FACES = 40_000
 AREA_MAP_MIN_ITERS = 3
-#: Rounds of error-driven reweighting when :func:`area_aware_map` is given ``levels`` (what
-#: :func:`remesh` does by default up to :data:`AREA_MAP_FULL_FACES` faces), and the Newton
-#: steps of each.  On camelhead (level 6) the Hausdorff error goes from 0.66 to 0.12 % of the
-#: diagonal (50k samples per surface).
+#: Rounds of error-driven reweighting when :func:`area_aware_map` is given ``levels`` (as
+#: :func:`remesh` and ``jaxparam remesh`` give it) up to :data:`AREA_MAP_FULL_FACES` faces, and
+#: the Newton steps of each: camelhead, level 6, 0.66 -> 0.12 % of the diagonal.
 AREA_MAP_ROUNDS = 4
 AREA_MAP_ROUND_ITERS = 10
+#: Above :data:`AREA_MAP_FULL_FACES` and up to this many faces, the reweighted map's own
+#: error-driven rounds (:data:`REWEIGHTED_ROUNDS`, one solve each: the same reweighting of the
+#: face weights, then one more round of :class:`~jaxparam.stretch_map.Reweighting`): camelhead
+#: refined once (90,816 faces), level 6, 0.795 -> 0.136 % of the diagonal; refined twice
+#: (363k) 0.735 -> 0.193 %, but there the rounds would take the remesh past twice the convex
+#: map's time (issue 15), so none run above this size.
+REWEIGHTED_ROUNDS_MAX_FACES = 200_000
+REWEIGHTED_ROUNDS = 12
 
 
 def area_map_iters(n_faces: int) -> int:
@@ -481,13 +486,13 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     of ``n`` unknowns where a Newton step factorizes ``2n`` (flip-free by Tutte's theorem;
     differentiable with its reweighting factors held fixed).
 
-    With ``levels`` (the default of :func:`remesh`, whose ``levels`` and ``corners`` it takes)
-    the default energy then samples where the error is: :data:`AREA_MAP_ROUNDS` rounds each
-    measure every input face's distance to the level-``levels`` remesh
-    (:func:`level_errors`), multiply the weights of the faces above 0.3 times the largest by
-    ``(e / (0.3 max e)) ** 2`` (spread to their neighbours) and take
-    :data:`AREA_MAP_ROUND_ITERS` more Newton steps; the map with the smallest largest error
-    is returned (the first one included, so it is never worse by that measure).
+    With ``levels`` (what :func:`remesh` passes, with its ``corners``) the default energy then
+    samples where the error is: :data:`AREA_MAP_ROUNDS` rounds each measure every input face's
+    distance to the level-``levels`` remesh (:func:`level_errors`), multiply the weights of the
+    faces above 0.3 times the largest by ``(e / (0.3 max e)) ** 2`` (spread to their
+    neighbours) and take :data:`AREA_MAP_ROUND_ITERS` more Newton steps (above 40k faces, up to
+    :data:`REWEIGHTED_ROUNDS_MAX_FACES`: :data:`REWEIGHTED_ROUNDS` rounds of one reweighted map
+    each); the map with the smallest largest error is returned (the first one included).
 
     **Arguments:** ``mesh`` a disk; ``energy`` ``"density_stretch"``, another name of
     ``jp.energies.ENERGIES`` or a :class:`jaxparam.Energy` (measured on camelhead at level 6,
@@ -509,7 +514,12 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     if (default and max_iters is None and weights == "shape_preserving" and boundary == "circle"
             and mesh.n_faces > AREA_MAP_FULL_FACES and np.all(mesh.topology.referenced)
             and concrete_values(mesh.vertices) is not None):
-        return reweighted_stretch_map(mesh)       # no Newton: one Cholesky per round
+        if levels is None or mesh.n_faces > REWEIGHTED_ROUNDS_MAX_FACES:
+            return reweighted_stretch_map(mesh)   # no Newton: one Cholesky per round
+        rw = Reweighting(mesh)
+        return _sample_where_the_error_is(mesh, rw.rounds(STRETCH_MAP_ITERS), np.mean(rw.area) / rw.area,
+                                          int(levels), corners, lambda uv, w: rw.reweighted(w),
+                                          REWEIGHTED_ROUNDS)
     iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
     start = convex_map(mesh, weights=weights, boundary=boundary)
     if mesh.topology.interior.size == 0:    # every vertex on the circle: nothing to minimize
@@ -520,8 +530,10 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
         area = np.asarray(geometry.face_areas(V, mesh.faces))
         weight = np.mean(area) / np.maximum(area, 1e-300)        # density_stretch's (A / mean)^-1
         uv = _stretch_newton(mesh, np.asarray(start), area * weight, iters=iters)
-        if levels is not None:
-            uv = _sample_where_the_error_is(mesh, uv, area, weight, int(levels), corners)
+        if levels is not None and mesh.n_faces <= AREA_MAP_FULL_FACES:
+            uv = _sample_where_the_error_is(
+                mesh, uv, weight, int(levels), corners,
+                lambda uv, w: _stretch_newton(mesh, uv, area * w, AREA_MAP_ROUND_ITERS), AREA_MAP_ROUNDS)
         uv[~mesh.topology.referenced] = np.nan
         return uv
     if default:
@@ -532,21 +544,22 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
     return res.uv
 
 
-def _sample_where_the_error_is(mesh, uv, area, weight, levels: int, corners) -> np.ndarray:
-    """:func:`area_aware_map`'s rounds of error-driven reweighting (see there)."""
+def _sample_where_the_error_is(mesh, uv, weight, levels: int, corners, step, rounds: int) -> np.ndarray:
+    """:func:`area_aware_map`'s ``rounds`` of error-driven reweighting (see there) from ``uv``
+    and face weights ``weight (m,)``; ``step(uv, weight) -> uv`` the map under new weights."""
     F = mesh.faces
     best, best_e = uv, np.inf
-    for r in range(AREA_MAP_ROUNDS + 1):
+    for r in range(rounds + 1):
         e = level_errors(mesh, uv, levels, corners)
         if e.max() < best_e:
             best, best_e = uv, float(e.max())
-        if r == AREA_MAP_ROUNDS or not best_e > 0:
+        if r == rounds or not best_e > 0:
             return best
         m = np.maximum(1.0, e / (0.3 * e.max())) ** 2
         at_v = np.zeros(mesh.n_vertices)
         np.maximum.at(at_v, F.ravel(), np.repeat(m, 3))
         weight = weight * at_v[F].mean(1)
-        uv = _stretch_newton(mesh, uv, area * weight, AREA_MAP_ROUND_ITERS)
+        uv = step(uv, weight)
     return best
 
 
@@ -559,9 +572,9 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
     - ``mesh`` a disk; ``uv (n, 2)`` a one-to-one parameterization of it (e.g.
       :func:`jaxparam.convex_map`; a convex boundary such as ``"circle"`` or ``"square"``
       guarantees the base domain fits); by default (``None``) the area-aware map of
-      :func:`area_aware_map` (circle boundary, L2 stretch minimized flip-free; up to 40k
-      faces reweighted where this level's remesh is far from the input; above, reweighted
-      convex maps), which samples the surface by area instead of squeezing its far parts;
+      :func:`area_aware_map` (circle boundary, L2 stretch minimized flip-free, reweighted
+      convex maps above 40k faces; up to 200k faces reweighted where this level's remesh is
+      far from the input), which samples the surface by area instead of squeezing its far parts;
     - ``levels`` the number of dyadic refinements;
     - ``base_faces`` the number of base triangles: the fan's corners, evenly spaced by arc
       length along the boundary from its first vertex (the same name as
@@ -619,8 +632,7 @@ def remesh(mesh: TriMesh, uv=None, levels: int = 4, *, base_faces: int = 6, corn
     fan = base_faces if corners is None else corners
     t = mesh.topology
     if uv is None:
-        small = mesh.n_faces <= AREA_MAP_FULL_FACES      # reweighted for this level's remesh
-        uv = area_aware_map(mesh, levels=int(levels) if small else None, corners=fan)
+        uv = area_aware_map(mesh, levels=int(levels), corners=fan)   # reweighted for this remesh
     traced = isinstance(uv, jax.core.Tracer)
     U = concrete_values(uv)
     if U is None:

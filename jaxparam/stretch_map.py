@@ -41,7 +41,7 @@ from .disk import disk_check
 from .errors import MeshError
 from .mesh import TriMesh, concrete_values
 
-__all__ = ["reweighted_stretch_map", "stretch_factors", "face_stretch", "STRETCH_MAP_ITERS"]
+__all__ = ["reweighted_stretch_map", "stretch_factors", "face_stretch", "Reweighting", "STRETCH_MAP_ITERS"]
 
 #: Rounds of reweighting of :func:`reweighted_stretch_map` (each one convex map's solve).  On
 #: camelhead refined twice (363k faces) the level-6 remesh's Hausdorff error is 1.34 / 0.74 /
@@ -116,38 +116,71 @@ def stretch_factors(mesh: TriMesh, *, face_weights=None, iters: int = STRETCH_MA
 
 def _rounds(mesh: TriMesh, face_weights, iters: int):
     """``(factors (e,), uv (n, 2))``: the reweighting rounds, on the host; ``uv`` the last map."""
-    V = concrete_values(mesh.vertices)
-    if V is None:
-        raise MeshError("reweighted_stretch_map: the vertex positions are traced without values "
-                        "(inside jax.jit or jax.vmap); the reweighting is chosen on their values: "
-                        "call it outside jax.jit (jax.grad and jax.jvp are fine).")
-    t, F = mesh.topology, mesh.faces
-    if len(t.boundary_loops) != 1 or not np.all(t.referenced) or t.interior.size == 0:
-        raise MeshError("reweighted_stretch_map: needs a disk with one boundary loop, interior "
-                        "vertices and every vertex in a face; fill the holes or drop the unused "
-                        "vertices first.")
-    E = t.edges
-    edges3d = (V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    area = 0.5 * np.linalg.norm(np.cross(*edges3d), axis=1)
-    w_T = (np.mean(area) / np.maximum(area, 1e-300) if face_weights is None
-           else np.asarray(face_weights, np.float64))
-    if w_T.shape != (F.shape[0],) or not np.all(w_T > 0):
-        raise MeshError(f"reweighted_stretch_map: face_weights must be ({F.shape[0]},) and positive.")
-    c = area * w_T
-    sw, den = np.sqrt(w_T), np.maximum(np.bincount(F.ravel(), np.repeat(c, 3), minlength=t.n_vertices), 1e-300)
-    solve, base = _Solver(mesh, V), _base_weights(V, E, np)
-    factor, power, uv = np.ones(E.shape[0]), 1.0, solve(base)
-    en, rr = _measure(uv, F, E, edges3d, c, sw, den)
-    for _ in range(int(iters)):
-        trial = factor / rr ** power
-        trial /= np.mean(trial)
-        uv_t = solve(base * trial)
-        en_t, rr_t = _measure(uv_t, F, E, edges3d, c, sw, den)
-        if en_t < en:
-            factor, uv, en, rr = trial, uv_t, en_t, rr_t
-        else:                       # overshot: undo, shorter step in the log of the weights
-            power *= 0.5
-    return factor, uv
+    rw = Reweighting(mesh, face_weights)
+    rw.rounds(iters)
+    return rw.factor, rw.uv
+
+
+class Reweighting:
+    """The state of :func:`reweighted_stretch_map`'s rounds on a disk mesh (on the host), kept
+    so that more rounds can follow under other face weights: the error-driven rounds of
+    :func:`jaxparam.remesh.area_aware_map` above 40k faces go on from the last factors, one
+    solve each, where a fresh map would take ``1 + iters``.
+
+    **Arguments:** ``mesh`` a disk with concrete vertices; ``face_weights (m,)`` the ``w_T``
+    of ``sum A_T w_T stretch_T`` (default ``mean A / A_T``).  **Fields:** ``factor (e,)``
+    the edge weights' factors, ``uv (n, 2)`` the last map (the first: inverse-distance
+    weights), ``power`` the current step in the log of the weights."""
+
+    def __init__(self, mesh: TriMesh, face_weights=None):
+        V = concrete_values(mesh.vertices)
+        if V is None:
+            raise MeshError("reweighted_stretch_map: the vertex positions are traced without values "
+                            "(inside jax.jit or jax.vmap); the reweighting is chosen on their values: "
+                            "call it outside jax.jit (jax.grad and jax.jvp are fine).")
+        t, F = mesh.topology, mesh.faces
+        if len(t.boundary_loops) != 1 or not np.all(t.referenced) or t.interior.size == 0:
+            raise MeshError("reweighted_stretch_map: needs a disk with one boundary loop, interior "
+                            "vertices and every vertex in a face; fill the holes or drop the unused "
+                            "vertices first.")
+        self.F, self.E, self.n = F, t.edges, t.n_vertices
+        self.edges3d = (V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        self.area = 0.5 * np.linalg.norm(np.cross(*self.edges3d), axis=1)
+        self.solve, self.base = _Solver(mesh, V), _base_weights(V, self.E, np)
+        self.factor, self.power, self.uv = np.ones(self.E.shape[0]), 1.0, self.solve(self.base)
+        self.weigh(face_weights)
+
+    def weigh(self, face_weights=None) -> None:
+        """Measure the last map under the face weights ``w_T`` (default ``mean A / A_T``)."""
+        F, area = self.F, self.area
+        w_T = (np.mean(area) / np.maximum(area, 1e-300) if face_weights is None
+               else np.asarray(face_weights, np.float64))
+        if w_T.shape != (F.shape[0],) or not np.all(w_T > 0):
+            raise MeshError(f"reweighted_stretch_map: face_weights must be ({F.shape[0]},) and positive.")
+        self.c = area * w_T
+        self.sw = np.sqrt(w_T)
+        self.den = np.maximum(np.bincount(F.ravel(), np.repeat(self.c, 3), minlength=self.n), 1e-300)
+        self.en, self.rr = _measure(self.uv, F, self.E, self.edges3d, self.c, self.sw, self.den)
+
+    def rounds(self, iters: int) -> np.ndarray:
+        """``iters`` rounds (one solve each; a round that raises the energy is undone and the
+        step halved); returns the last map ``uv (n, 2)``."""
+        for _ in range(int(iters)):
+            trial = self.factor / self.rr ** self.power
+            trial /= np.mean(trial)
+            uv_t = self.solve(self.base * trial)
+            en_t, rr_t = _measure(uv_t, self.F, self.E, self.edges3d, self.c, self.sw, self.den)
+            if en_t < self.en:
+                self.factor, self.uv, self.en, self.rr = trial, uv_t, en_t, rr_t
+            else:                       # overshot: undo, shorter step in the log of the weights
+                self.power *= 0.5
+        return self.uv
+
+    def reweighted(self, face_weights, iters: int = 1) -> np.ndarray:
+        """The map after ``iters`` more rounds under new ``face_weights (m,)``, from a full step."""
+        self.weigh(face_weights)
+        self.power = 1.0
+        return self.rounds(iters)
 
 
 def reweighted_stretch_map(mesh: TriMesh, *, face_weights=None, iters: int = STRETCH_MAP_ITERS,
