@@ -10,7 +10,8 @@ faces, UVs):
 - E_sd: area-weighted symmetric Dirichlet ``(s1^2 + s2^2 + s1^-2 + s2^-2) / 2`` with the UVs
   scaled so their area is the 3D area (isometry = 2; unsigned singular values, so mirrored
   charts count as they look);
-- max s1/s2; covered: UV area over the unit square's; mirrored: charts (and their faces)
+- max s1/s2; covered: UV area over the unit square's (xatlas packs into a rectangle of its own
+  choosing: where it is not square, also its share of the square of the longer side); mirrored: charts (and their faces)
   whose signed UV area is negative; flips: faces of negative signed UV area inside charts
   of positive total area; overlaps: boundary edges of two charts that cross, plus charts
   lying inside another (:func:`chart_overlaps`, no use of the packer); border: the least
@@ -27,6 +28,7 @@ Usage::
     python benchmarks/atlas.py --big --xatlas-cap 600  # stop xatlas after 600 s
     python benchmarks/atlas.py --compact 0 ...        # jaxparam without the chart cuts
     python benchmarks/atlas.py --noise 0.2 cow.off     # vertex noise of 0.2 % of the diagonal
+    python benchmarks/atlas.py --thin [--no-strips]    # held-out thin shapes (long charts)
 
 xatlas is a benchmark-only extra (``pip install xatlas``); the engine never imports it.
 """
@@ -181,7 +183,8 @@ def _xatlas_child(src: str, dst: str) -> None:
     at.add_mesh(d["V"].astype(np.float32), d["F"].astype(np.uint32))
     at.generate()
     vmap, idx, uvs = at[0]
-    np.savez(dst, uv=uvs.astype(np.float64), idx=idx.astype(np.int64), seconds=time.perf_counter() - t0)
+    np.savez(dst, uv=uvs.astype(np.float64), idx=idx.astype(np.int64), seconds=time.perf_counter() - t0,
+             size=np.array([at.width, at.height]))
 
 
 def run_xatlas(mesh, cap: float = 900.0) -> dict:
@@ -201,7 +204,27 @@ def run_xatlas(mesh, cap: float = 900.0) -> dict:
         d = np.load(dst)
         r = measure(V, mesh.faces, d["uv"], d["idx"])
         r["seconds"] = float(d["seconds"])
+        w, h = (int(x) for x in d["size"])
+        # xatlas's UVs span its own w x h texels: in a square texture of the longer side
+        # (jaxparam packs for a square) the same charts cover this much less
+        r["square"] = r["covered"] * min(w, h) / max(w, h, 1)
     return r
+
+
+def thin_shapes(jp):
+    """``(name, make)`` of held-out thin shapes, whose charts are long: a torus of tube radius
+    0.06 (96 x 12), a 1 : 0.25 : 0.06 ellipsoid (a subdivided icosahedron, 5,120 faces), a
+    capsule 8 long and 0.3 in radius (trimesh's, split to edges of at most 0.25)."""
+    def capsule():
+        import trimesh
+        c = trimesh.creation.capsule(height=8, radius=0.3, count=[24, 24]).subdivide_to_size(0.25)
+        return jp.TriMesh(np.asarray(c.vertices, np.float64), np.asarray(c.faces))
+
+    def ellipsoid():
+        s = jp.shapes.sphere(4)
+        return jp.TriMesh(np.asarray(s.vertices) * [1.0, 0.25, 0.06], s.faces)
+    return [("thin torus (r 0.06)", lambda: jp.shapes.torus(96, 12, r=0.06)),
+            ("flat ellipsoid", ellipsoid), ("capsule 8 x 0.3", capsule)]
 
 
 def main(argv=None) -> None:
@@ -216,6 +239,10 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", type=float, default=0.0,
                     help="Gaussian vertex noise, RMS in %% of the bounding-box diagonal (a scan's)")
     ap.add_argument("--seed", type=int, default=31, help="the noise's seed")
+    ap.add_argument("--thin", action="store_true",
+                    help="generated thin shapes instead (a thin torus, a flat ellipsoid, a long capsule)")
+    ap.add_argument("--no-strips", action="store_true",
+                    help="jp.atlas without the long-chart cuts (atlas.build.STRIP_SHARES = ())")
     ap.add_argument("--xatlas-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.xatlas_child:
@@ -224,7 +251,10 @@ def main(argv=None) -> None:
     import jaxparam as jp
 
     names = args.meshes or sorted(p.name for p in DATA.iterdir())
-    cases = [(nm, lambda nm=nm: jp.load(DATA / nm)) for nm in names]
+    cases = thin_shapes(jp) if args.thin else [(nm, lambda nm=nm: jp.load(DATA / nm)) for nm in names]
+    if args.no_strips:
+        import importlib
+        importlib.import_module("jaxparam.atlas.build").STRIP_SHARES = ()
     if args.noise:
         cases = [(f"{nm} + {args.noise:g} % noise", lambda make=make: noisy(make(), args.noise, args.seed))
                  for nm, make in cases]
@@ -252,8 +282,9 @@ def main(argv=None) -> None:
                 print(f"| {name} | {mesh.n_faces:,} | {tool} | stopped after {r['capped']:.0f} s "
                       f"| | | | | | | | | > cap | {os.getloadavg()[0]:.1f} |", flush=True)
                 continue
+            square = f" ({100 * r['square']:.1f} % of a square)" if r.get("square", r["covered"]) < r["covered"] else ""
             print(f"| {name} | {mesh.n_faces:,} | {tool} | {r['charts']} | {r['seam']:.2f} | "
-                  f"{r['E_sd']:.4f} | {r['max_aspect']:.2f} | {100 * r['covered']:.1f} % | "
+                  f"{r['E_sd']:.4f} | {r['max_aspect']:.2f} | {100 * r['covered']:.1f} %{square} | "
                   f"{r['mirrored']} ({r['mirrored_faces']}) | {r['flips']} | {r['overlaps']} | "
                   f"{r['border']:.1f} | {r['seconds']:.1f} | "
                   f"{os.getloadavg()[0]:.1f} |", flush=True)

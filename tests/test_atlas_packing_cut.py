@@ -59,6 +59,8 @@ def test_the_widest_of_a_few_charts_is_cut_when_they_pack_loosely(strip, monkeyp
 
     monkeypatch.setattr(build, "PACKING_CUT_ROUNDS", 1)
     monkeypatch.setattr(build, "PACKING_CUT_TRIED", 8)
+    # the long-chart cut (tests/test_atlas_strips.py) would cut the strip in three first
+    monkeypatch.setattr(build, "STRIP_SHARES", ())
 
     sq = jp.shapes.plane_grid(5, 5)
     V = np.r_[np.asarray(strip.vertices), np.asarray(sq.vertices) * [0.8, 0.8, 1.0] + [0.0, 3.0, 0.0]]
@@ -109,6 +111,8 @@ def test_only_the_charts_of_one_percent_of_the_area_count_towards_the_few(strip,
 
     monkeypatch.setattr(build, "PACKING_CUT_ROUNDS", 1)
     monkeypatch.setattr(build, "PACKING_CUT_TRIED", 8)
+    # the long-chart cut (tests/test_atlas_strips.py) would cut the strip in three first
+    monkeypatch.setattr(build, "STRIP_SHARES", ())
     tri = np.array([[0.0, 0.0, 0.0], [0.03, 0.0, 0.0], [0.0, 0.03, 0.0]])
     specks = [tri + [0.3 * i, 3.0, 0.0] for i in range(9)]
     V = np.concatenate([np.asarray(strip.vertices)] + specks)
