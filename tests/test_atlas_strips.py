@@ -82,3 +82,38 @@ def test_a_thin_torus_packs_its_tube_in_pieces(thin_torus, monkeypatch):
     check_atlas(thin_torus, cut, min_coverage=0.55)
     assert cut.stats.sym_dirichlet <= whole.stats.sym_dirichlet * (1 + 1e-9)
     assert cut.stats.max_aspect <= build.STRIP_ASPECT_SLACK * whole.stats.max_aspect
+
+
+def test_an_arc_is_cut_along_its_length_only_as_a_curved_chart():
+    """Three quarters of a thin annulus (radii 1 and 1.2, flat, one chart): its minimal-area
+    rectangle is not long, so the straight rule leaves it whole; along it the arc is 5.2 long
+    for an area of 1.04 (D^2 / A about 26), so the curved rule cuts it into slabs by the
+    distance from one end: each a face-connected disk, of about equal length along the arc."""
+    a, r = np.meshgrid(np.linspace(0, 1.5 * np.pi, 61), np.linspace(1.0, 1.2, 4), indexing="ij")
+    V = np.stack([r * np.cos(a), r * np.sin(a), 0 * a], -1).reshape(-1, 3)
+    g = jp.shapes.plane_grid(61, 4)                  # the same grid's faces, 61 x 4 vertices
+    Vg = np.asarray(g.vertices)
+    ia = np.rint(Vg[:, 0] * 60).astype(int)
+    ir = np.rint(Vg[:, 1] * 3).astype(int)
+    mesh = jp.TriMesh(V[ia * 4 + ir], g.faces)
+    corner_uv = flat_chart(mesh)
+    d1, d2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
+    if np.sum(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) < 0:
+        mesh = jp.TriMesh(mesh.vertices, np.asarray(mesh.faces)[:, ::-1])
+        corner_uv = flat_chart(mesh)
+    adj = face_csr(mesh.topology)
+    zero = np.zeros(mesh.n_faces, np.int64)
+    straight, _ = plan_strips(corner_uv, mesh.faces, zero, adj, curved=False)
+    assert straight.max() == 0
+    chart, parent = plan_strips(corner_uv, mesh.faces, zero, adj)
+    area = 1.5 * np.pi * (1.2 ** 2 - 1.0) / 2
+    side = np.sqrt(area / 0.75)
+    n = chart.max() + 1
+    assert n >= 2 and np.all(parent == 0)
+    angle = np.arctan2(corner_uv.mean(1)[:, 1], corner_uv.mean(1)[:, 0]) % (2 * np.pi)
+    for c in range(n):
+        idx = np.flatnonzero(chart == c)
+        assert sp.csgraph.connected_components(adj[idx][:, idx], directed=False)[0] == 1
+        assert faces_are_disk(mesh.faces[idx])
+        # a slab spans at most the side's length of arc (radius 1.1), a face more
+        assert np.ptp(angle[idx]) * 1.1 <= side + 0.1

@@ -116,13 +116,19 @@ STRIP_ASPECT_SLACK = 1.05
 
 def _long_charts_cut(V, F, chart, corner_uv, adj_csr, en, solver, max_iters, layout, laid):
     """Long charts cut across their length (:func:`~jaxparam.atlas.compact.plan_strips`, at
-    each of :data:`STRIP_SHARES`), the pieces minimized again from their parent's map;
+    each of :data:`STRIP_SHARES`, the straight ones alone and then with the curved ones: one
+    plan for all charts, so a curved chart whose cut packs worse would spoil a straight one's
+    gain), the pieces minimized again from their parent's map;
     **returns** ``(chart, corner_uv, laid)``: the layout that covers most, the given one
     unless a cut packs tighter (``layout(chart, corner_uv)`` packs)."""
     best = (chart, corner_uv, laid)
     ceiling = STRIP_ASPECT_SLACK * _largest_aspect(V, F, corner_uv)
-    for share in STRIP_SHARES:
-        new, parent = cp.plan_strips(corner_uv, F, chart, adj_csr, share=share)
+    tried = []
+    for curved, share in [(c, s) for c in (False, True) for s in STRIP_SHARES]:
+        new, parent = cp.plan_strips(corner_uv, F, chart, adj_csr, share=share, curved=curved)
+        if any(np.array_equal(new, t) for t in tried):
+            continue
+        tried.append(new)
         cut, cuv, made = _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver,
                                            max_iters, ceiling=ceiling)
         if not made:

@@ -25,7 +25,7 @@ from .charts import faces_are_disk
 from .pack import boundary_segments, min_area_rotation
 
 __all__ = ["hull_area", "hull_areas", "chart_rim", "best_cut", "straight_cuts", "two_disks", "plan_splits",
-           "plan_strips", "STRIP_SHARE", "STRIP_ASPECT"]
+           "plan_strips", "STRIP_SHARE", "STRIP_ASPECT", "STRIP_CURVED_ASPECT", "STRIP_MIN_FACES"]
 
 #: Cut directions (radians, in the chart's minimal-area-rectangle frame) and positions
 #: (quantiles of the face centroids' coordinate along the direction).
@@ -198,23 +198,58 @@ def two_disks(side: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix) -> bo
 
 
 #: :func:`plan_strips` cuts a chart longer than ``STRIP_SHARE`` times the side of the square
-#: that the atlas's UV area fills at 75 %, and at least ``STRIP_ASPECT`` times longer than wide.
+#: that the atlas's UV area fills at 75 %: a straight one at least ``STRIP_ASPECT`` times
+#: longer than wide (its minimal-area rectangle), a curved one (an arc, a spiral) whose length
+#: ``D`` along it and area ``A`` have ``D^2 > STRIP_CURVED_ASPECT A`` (a strip of aspect ``a``
+#: has ``D^2 / A`` about ``a``, a square 2, a disk 1.3).
 STRIP_SHARE = 1.0
 STRIP_ASPECT = 2.0
+STRIP_CURVED_ASPECT = 3.0
+#: Charts of fewer faces are not cut.
+STRIP_MIN_FACES = 2
+
+
+def _along(corner_uv: np.ndarray, sub: sp.csr_matrix, area: float) -> np.ndarray:
+    """``(f,)``: each face's distance along a chart (UV centroids, paths through the face
+    adjacency ``sub``) from its end: the faces within the chart's width (``area`` over its
+    length) of the face farthest from another (two sweeps), so that the level sets run across
+    the chart rather than around one corner face."""
+    from scipy.sparse.csgraph import dijkstra
+
+    c = corner_uv.mean(1)
+    coo = sp.triu(sub, 1).tocoo()
+    w = np.linalg.norm(c[coo.row] - c[coo.col], axis=1) + 1e-300
+    G = sp.csr_matrix((w, (coo.row, coo.col)), shape=sub.shape)
+
+    def far(d):
+        return int(np.argmax(np.where(np.isfinite(d), d, -1)))
+    d = dijkstra(G, directed=False, indices=far(dijkstra(G, directed=False, indices=0)))
+    d = np.where(np.isfinite(d), d, 0.0)
+    end = np.flatnonzero(d <= area / max(float(d.max()), 1e-300))
+    d = dijkstra(G, directed=False, indices=end, min_only=True)
+    return np.where(np.isfinite(d), d, 0.0)
 
 
 def plan_strips(corner_uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, adj_csr: sp.csr_matrix,
-                *, share: float = STRIP_SHARE, aspect: float = STRIP_ASPECT):
-    """Cut long charts across their length into pieces of equal length.
+                *, share: float = STRIP_SHARE, aspect: float = STRIP_ASPECT,
+                curved_aspect: float = STRIP_CURVED_ASPECT, curved: bool = True):
+    """Cut long charts along their length into pieces of equal length.
 
     A long chart bounds the packing's scale by its length alone: a strip of aspect ``a``
     alone in the square covers at most ``1 / a`` of it (a held-out capsule, 8 x 0.3, packed
     as 3 charts covered 19.3 %), while ``k`` pieces side by side fill it (best near
-    ``k = sqrt(a)``).  Each chart whose minimal-area rectangle is longer than ``share``
-    times the side ``sqrt(A / 0.75)`` of the square that the atlas's UV area ``A`` would fill
-    at 75 %, and ``aspect`` times longer than wide, is cut by lines across its rectangle's
-    long axis into ``ceil(length / (share side))`` slabs (faces by their UV centroid); a chart
-    whose slabs are not all face-connected disks (an arc, a U) is left whole.
+    ``k = sqrt(a)``).  A chart longer than ``share`` times the side ``sqrt(A / 0.75)`` of the
+    square that the atlas's UV area ``A`` would fill at 75 % is cut into ``n = ceil(length /
+    (share side))`` slabs of equal length:
+
+    - straight: its minimal-area rectangle at least ``aspect`` times longer than wide, the
+      slabs by lines across the rectangle's long axis (faces by their UV centroid);
+    - else curved (an arc, the spiral of a helical tube's side): its length ``D`` the largest
+      distance along it (:func:`_along`), ``D^2 > curved_aspect`` times its area, the slabs
+      by that distance from one end.
+
+    A chart whose slabs are not all face-connected disks (a hairpin, whose slabs hold both
+    arms) is left whole; so is every curved one with ``curved=False``.
 
     **Arguments and returns:** as :func:`plan_splits` (``corner_uv (m, 3, 2)`` at 3D scale,
     ``faces (m, 3)``, ``chart (m,)``, ``adj_csr`` the face adjacency); ``(chart (m,), parent
@@ -223,23 +258,40 @@ def plan_strips(corner_uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, adj
     k = int(chart.max()) + 1
     parent = list(range(k))
     d1, d2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
-    area = 0.5 * float(np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]).sum())
-    limit = share * np.sqrt(area / 0.75)
+    fa = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+    limit = share * np.sqrt(fa.sum() / 0.75)
     order = np.argsort(chart, kind="stable")
     bounds = np.searchsorted(chart[order], np.arange(k + 1))
+
+    def slabs(t, length, sub, fk):
+        """Slab labels ``(f,)`` of coordinate ``t`` (from 0 at the chart's end to ``length``)
+        along the chart, or None (not all disks)."""
+        n = int(np.ceil(length / limit))
+        slab = np.clip((t / length * n).astype(np.int64), 0, n - 1)
+        ok = all((slab == j).any() and _connected(sub, slab == j) and faces_are_disk(faces[fk[slab == j]])
+                 for j in range(n))
+        return slab if ok else None
+
     for c in range(k):
         fk = order[bounds[c]:bounds[c + 1]]
+        if fk.size < STRIP_MIN_FACES:
+            continue
+        sub = adj_csr[fk][:, fk]
         Q = corner_uv[fk] @ min_area_rotation(corner_uv[fk].reshape(-1, 2)).T     # long axis: u
         length, width = np.ptp(Q[..., 0]), np.ptp(Q[..., 1])
-        if not (length > limit and length > aspect * width):
+        slab = None
+        if length > limit and length > aspect * width:
+            slab = slabs(Q[..., 0].mean(1) - Q[..., 0].min(), length, sub, fk)
+        # a path along the chart is at most a face diameter per face: a cheap bound first
+        reach = fk.size * float(np.max(np.linalg.norm(np.diff(corner_uv[fk], axis=1, append=corner_uv[fk][:, :1]), axis=2)))
+        if slab is None and curved and reach > limit:
+            t = _along(corner_uv[fk], sub, float(fa[fk].sum()))
+            D = float(t.max())
+            if D > limit and D * D > curved_aspect * fa[fk].sum():
+                slab = slabs(t, D, sub, fk)
+        if slab is None:
             continue
-        n = int(np.ceil(length / limit))
-        slab = np.clip(((Q[..., 0].mean(1) - Q[..., 0].min()) / length * n).astype(np.int64), 0, n - 1)
-        sub = adj_csr[fk][:, fk]
-        if not all((slab == j).any() and _connected(sub, slab == j) and faces_are_disk(faces[fk[slab == j]])
-                   for j in range(n)):
-            continue
-        for j in range(1, n):
+        for j in range(1, int(slab.max()) + 1):
             chart[fk[slab == j]] = len(parent)
             parent.append(c)
     return chart, np.asarray(parent, np.int64)
