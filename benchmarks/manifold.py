@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "meshes"
-CLOSED = ["bunny.off", "cow.off", "3holes.off", "decimated-knight.off", "rocker-arm.obj"]
+CLOSED = ["bunny.off", "cow.off", "3holes.off", "decimated-knight.off", "rocker-arm.obj", "bumpy.off"]
 
 
 def _dist(jp, A, B, samples=20_000):
