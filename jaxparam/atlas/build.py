@@ -561,8 +561,10 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                     laid2 = None                  # layout that does (a held-out torus: 8
                 if laid2 is not None and laid2[-1] > laid[-1]:   # charts fit, 12 did not)
                     chart, corner_uv, laid = chart2, corner_uv2, laid2
-            chart, corner_uv, laid = _long_charts_cut(V, F, chart, corner_uv, adj_csr, en, solver,
-                                                      max_iters, layout, laid)
+            k = int(chart.max()) + 1
+            if k <= COMPACT_CHARTS and F.shape[0] >= COMPACT_MIN_FACES * k:   # as the compaction
+                chart, corner_uv, laid = _long_charts_cut(V, F, chart, corner_uv, adj_csr, en,
+                                                          solver, max_iters, layout, laid)
             for _ in range(PACKING_CUT_ROUNDS):
                 k = int(chart.max()) + 1
                 if not (_large_charts(chart, corner_uv) <= PACKING_CUT_CHARTS and k <= COMPACT_CHARTS
