@@ -414,11 +414,9 @@ def snap_boundary(uvj: np.ndarray, s: np.ndarray, curve: BoundaryCurve, faces: n
 #: 10-15 steps on the shared disk meshes; later steps change the remesh error by under 1 %.
 AREA_MAP_ITERS = 25
 #: Above this many faces the default map is :func:`jaxparam.stretch_map.reweighted_stretch_map`
-#: (camelhead refined twice, 363k faces, level 6: Hausdorff 0.74 % of the diagonal instead of
-#: 6.0 % for 3 Newton steps; map + remesh 14 s instead of 86 s, 1.3x the convex map's 10.7 s at
-#: load 18); where Newton still runs there (a given ``max_iters`` or ``weights``, another energy,
-#: vertices traced under ``jax.jit``) its step count falls as ``AREA_MAP_ITERS * FULL / faces``
-#: (at least :data:`AREA_MAP_MIN_ITERS`).
+#: (camelhead x16, level 6: 0.74 % of the diagonal against 6.0 % for 3 Newton steps, 14 s
+#: against 86 s); where Newton still runs there (a given ``max_iters`` or ``weights``, another
+#: energy, traced under ``jax.jit``) its steps fall as ``AREA_MAP_ITERS * FULL / faces``.
 AREA_MAP_FULL_FACES = 40_000
 AREA_MAP_MIN_ITERS = 3
 #: Rounds of error-driven reweighting when :func:`area_aware_map` is given ``levels`` (as
@@ -426,12 +424,9 @@ AREA_MAP_MIN_ITERS = 3
 #: the Newton steps of each: camelhead, level 6, 0.66 -> 0.12 % of the diagonal.
 AREA_MAP_ROUNDS = 4
 AREA_MAP_ROUND_ITERS = 10
-#: Above :data:`AREA_MAP_FULL_FACES` and up to this many faces, the reweighted map's own
-#: error-driven rounds (:data:`REWEIGHTED_ROUNDS`, one solve each: the same reweighting of the
-#: face weights, then one more round of :class:`~jaxparam.stretch_map.Reweighting`): camelhead
-#: refined once (90,816 faces), level 6, 0.795 -> 0.136 % of the diagonal; refined twice
-#: (363k) 0.735 -> 0.193 %, but there the rounds would take the remesh past twice the convex
-#: map's time (issue 15), so none run above this size.
+#: From :data:`AREA_MAP_FULL_FACES` to this many faces, :data:`REWEIGHTED_ROUNDS` error-driven
+#: rounds of one :class:`~jaxparam.stretch_map.Reweighting` solve each (camelhead x4, level 6:
+#: 0.795 -> 0.136 %); none above (at 363k they would pass twice the convex map's time).
 REWEIGHTED_ROUNDS_MAX_FACES = 200_000
 REWEIGHTED_ROUNDS = 12
 
@@ -516,10 +511,14 @@ def area_aware_map(mesh: TriMesh, *, energy="density_stretch", max_iters: int | 
             and concrete_values(mesh.vertices) is not None):
         if levels is None or mesh.n_faces > REWEIGHTED_ROUNDS_MAX_FACES:
             return reweighted_stretch_map(mesh)   # no Newton: one Cholesky per round
-        rw = Reweighting(mesh)
-        return _sample_where_the_error_is(mesh, rw.rounds(STRETCH_MAP_ITERS), np.mean(rw.area) / rw.area,
+        # the rounds on the values; traced vertices (jax.grad) get the chosen map's factors
+        traced = isinstance(mesh.vertices, jax.core.Tracer)
+        V = TriMesh(concrete_values(mesh.vertices), mesh.faces, mesh.topology, validate=False) if traced else mesh
+        rw = Reweighting(V)
+        best = _sample_where_the_error_is(V, rw.rounds(STRETCH_MAP_ITERS), np.mean(rw.area) / rw.area,
                                           int(levels), corners, lambda uv, w: rw.reweighted(w),
                                           REWEIGHTED_ROUNDS)
+        return reweighted_stretch_map(mesh, factors=rw.factors_of(best)) if traced else best
     iters = area_map_iters(mesh.n_faces) if max_iters is None else int(max_iters)
     start = convex_map(mesh, weights=weights, boundary=boundary)
     if mesh.topology.interior.size == 0:    # every vertex on the circle: nothing to minimize

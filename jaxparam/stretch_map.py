@@ -130,7 +130,8 @@ class Reweighting:
     **Arguments:** ``mesh`` a disk with concrete vertices; ``face_weights (m,)`` the ``w_T``
     of ``sum A_T w_T stretch_T`` (default ``mean A / A_T``).  **Fields:** ``factor (e,)``
     the edge weights' factors, ``uv (n, 2)`` the last map (the first: inverse-distance
-    weights), ``power`` the current step in the log of the weights."""
+    weights), ``power`` the current step in the log of the weights, ``maps`` every map
+    :meth:`rounds` returned with its factors."""
 
     def __init__(self, mesh: TriMesh, face_weights=None):
         V = concrete_values(mesh.vertices)
@@ -148,6 +149,7 @@ class Reweighting:
         self.area = 0.5 * np.linalg.norm(np.cross(*self.edges3d), axis=1)
         self.solve, self.base = _Solver(mesh, V), _base_weights(V, self.E, np)
         self.factor, self.power, self.uv = np.ones(self.E.shape[0]), 1.0, self.solve(self.base)
+        self.maps = []
         self.weigh(face_weights)
 
     def weigh(self, face_weights=None) -> None:
@@ -174,7 +176,13 @@ class Reweighting:
                 self.factor, self.uv, self.en, self.rr = trial, uv_t, en_t, rr_t
             else:                       # overshot: undo, shorter step in the log of the weights
                 self.power *= 0.5
+        self.maps.append((self.uv, self.factor))
         return self.uv
+
+    def factors_of(self, uv: np.ndarray) -> np.ndarray:
+        """``(e,)``: the factors that made ``uv``, a map :meth:`rounds` returned
+        (:func:`reweighted_stretch_map`'s ``factors``: the same map, differentiable)."""
+        return next(f for u, f in self.maps if u is uv)
 
     def reweighted(self, face_weights, iters: int = 1) -> np.ndarray:
         """The map after ``iters`` more rounds under new ``face_weights (m,)``, from a full step."""

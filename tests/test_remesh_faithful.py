@@ -421,3 +421,35 @@ def test_the_reweighting_goes_on_from_its_last_factors(mesh):
             assert rw.en == before and rw.power == 0.5 and uv is last
     with pytest.raises(jp.MeshError, match="face_weights must be"):
         rw.weigh(-w)
+
+
+def test_the_rounds_above_the_newton_size_are_differentiable_with_their_factors_fixed(mesh, monkeypatch):
+    """Under ``jax.grad`` the rounds run on the vertices' values and the chosen map is
+    rebuilt from its factors (``reweighted_stretch_map(factors=)``): the same map as without
+    tracing, and the gradient of that map with the factors held fixed (central differences)."""
+    import sys
+    from jaxparam.stretch_map import reweighted_stretch_map
+    module = sys.modules["jaxparam.remesh"]
+    monkeypatch.setattr(module, "AREA_MAP_FULL_FACES", mesh.n_faces - 1)
+    monkeypatch.setattr(module, "REWEIGHTED_ROUNDS", 3)
+    chosen = []
+    real = module.reweighted_stretch_map
+
+    def spy(m, **kw):
+        chosen.append(kw.get("factors"))
+        return real(m, **kw)
+    monkeypatch.setattr(module, "reweighted_stretch_map", spy)
+
+    def f(V):
+        return jnp.sum(area_aware_map(jp.TriMesh(V, mesh.faces), levels=3) ** 3)
+    V0 = jnp.asarray(mesh.vertices)
+    value, g = jax.value_and_grad(f)(V0)              # traced: the map rebuilt from its factors
+    factors = chosen[-1]
+    assert factors is not None
+    np.testing.assert_allclose(float(value), float(np.sum(area_aware_map(mesh, levels=3) ** 3)), rtol=1e-12)
+
+    def fixed(V):
+        return jnp.sum(reweighted_stretch_map(jp.TriMesh(V, mesh.faces), factors=factors) ** 3)
+    d = jax.random.normal(jax.random.PRNGKey(3), V0.shape)
+    fd = (fixed(V0 + 1e-6 * d) - fixed(V0 - 1e-6 * d)) / 2e-6
+    assert abs(float(jnp.sum(g * d)) - float(fd)) < 1e-6 * max(1.0, abs(float(fd)))
