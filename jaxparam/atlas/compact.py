@@ -276,16 +276,18 @@ def plan_strips(corner_uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, adj
         fk = order[bounds[c]:bounds[c + 1]]
         if fk.size < STRIP_MIN_FACES:
             continue
-        sub = adj_csr[fk][:, fk]
-        Q = corner_uv[fk] @ min_area_rotation(corner_uv[fk].reshape(-1, 2)).T     # long axis: u
+        T = corner_uv[fk]
+        Q = T @ min_area_rotation(T.reshape(-1, 2)).T                  # long axis: u
         length, width = np.ptp(Q[..., 0]), np.ptp(Q[..., 1])
-        slab = None
-        if length > limit and length > aspect * width:
-            slab = slabs(Q[..., 0].mean(1) - Q[..., 0].min(), length, sub, fk)
-        # a path along the chart is at most a face diameter per face: a cheap bound first
-        reach = fk.size * float(np.max(np.linalg.norm(np.diff(corner_uv[fk], axis=1, append=corner_uv[fk][:, :1]), axis=2)))
+        straight = length > limit and length > aspect * width
+        # a path along the chart is at most a face's longest edge per face: a cheap bound first
+        reach = fk.size * float(np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max())
+        if not (straight or (curved and reach > limit)):
+            continue
+        sub = adj_csr[fk][:, fk]
+        slab = slabs(Q[..., 0].mean(1) - Q[..., 0].min(), length, sub, fk) if straight else None
         if slab is None and curved and reach > limit:
-            t = _along(corner_uv[fk], sub, float(fa[fk].sum()))
+            t = _along(T, sub, float(fa[fk].sum()))
             D = float(t.max())
             if D > limit and D * D > curved_aspect * fa[fk].sum():
                 slab = slabs(t, D, sub, fk)
