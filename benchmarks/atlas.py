@@ -224,25 +224,9 @@ def thin_shapes(jp):
     def ellipsoid():
         s = jp.shapes.sphere(4)
         return jp.TriMesh(np.asarray(s.vertices) * [1.0, 0.25, 0.06], s.faces)
-    def helix():
-        # a tube of radius 0.08 along 3 turns of a helix (radius 1, pitch 0.3 pi), open ends
-        t = np.linspace(0, 6 * np.pi, 300)
-        path = np.stack([np.cos(t), np.sin(t), 0.15 * t], 1)
-        T = np.gradient(path, axis=0)
-        T /= np.linalg.norm(T, axis=1, keepdims=True)
-        N = np.cross(T, [0.0, 0.0, 1.0])
-        N /= np.linalg.norm(N, axis=1, keepdims=True)
-        B = np.cross(T, N)
-        th = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-        V = (path[:, None] + 0.08 * (np.cos(th)[None, :, None] * N[:, None]
-                                     + np.sin(th)[None, :, None] * B[:, None])).reshape(-1, 3)
-        i, j = np.meshgrid(np.arange(len(t) - 1), np.arange(16), indexing="ij")
-        a0, a1 = i * 16 + j, i * 16 + (j + 1) % 16
-        F = np.concatenate([np.stack([a0, a1, a0 + 16], -1).reshape(-1, 3),
-                            np.stack([a1, a1 + 16, a0 + 16], -1).reshape(-1, 3)])
-        return jp.TriMesh(V, F)
     return [("thin torus (r 0.06)", lambda: jp.shapes.torus(96, 12, r=0.06)),
-            ("flat ellipsoid", ellipsoid), ("capsule 8 x 0.3", capsule), ("helical tube", helix)]
+            ("flat ellipsoid", ellipsoid), ("capsule 8 x 0.3", capsule),
+            ("helical tube", lambda: jp.shapes.helical_tube(3.0, 300, 16))]
 
 
 def main(argv=None) -> None:

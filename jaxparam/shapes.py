@@ -11,7 +11,7 @@ from .mesh import TriMesh, grid_faces
 from .subdivision import midpoint_refine
 
 __all__ = ["grid_faces", "plane_grid", "graph_surface", "cylinder_patch", "example5",
-           "disk", "sphere", "torus", "revolution", "refine"]
+           "disk", "sphere", "torus", "revolution", "helical_tube", "refine"]
 
 
 def _grid_uv(nu: int, nv: int, jitter: float = 0.0, seed: int = 0) -> np.ndarray:
@@ -111,6 +111,28 @@ def torus(nu: int = 24, nv: int = 12, *, R: float = 1.0, r: float = 0.35) -> Tri
     d = (i * nv + (j + 1) % nv).ravel()
     F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return TriMesh(V, F, name="torus")
+
+
+def helical_tube(turns: float = 3.0, along: int = 300, around: int = 16, *, r: float = 0.08) -> TriMesh:
+    """An open tube of radius ``r`` along ``turns`` turns of a helix (radius 1, rising 0.15 per
+    radian): ``along`` rings of ``around`` vertices, two boundary loops (the ends).  Its side
+    strips wind past a full turn, so a chart of them flattens into a spiral that crosses itself
+    (the atlas's hard case for long, curved charts)."""
+    t = np.linspace(0, 2 * np.pi * turns, along)
+    path = np.stack([np.cos(t), np.sin(t), 0.15 * t], 1)
+    T = np.gradient(path, axis=0)
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    N = np.cross(T, [0.0, 0.0, 1.0])
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    B = np.cross(T, N)
+    th = np.linspace(0, 2 * np.pi, around, endpoint=False)
+    V = (path[:, None] + r * (np.cos(th)[None, :, None] * N[:, None]
+                              + np.sin(th)[None, :, None] * B[:, None])).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(along - 1), np.arange(around), indexing="ij")
+    a0, a1 = i * around + j, i * around + (j + 1) % around
+    F = np.concatenate([np.stack([a0, a1, a0 + around], -1).reshape(-1, 3),
+                        np.stack([a1, a1 + around, a0 + around], -1).reshape(-1, 3)])
+    return TriMesh(V, F, name="helical_tube")
 
 
 def revolution(around: int = 64, along: int = 8, *, height: float = 10.0) -> TriMesh:

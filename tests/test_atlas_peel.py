@@ -57,27 +57,6 @@ def test_camelhead_atlas_covers_three_quarters():
     assert a.n_charts < 305
 
 
-def _helical_tube(turns=2.0, k=100, nu=8, r=0.08):
-    """A tube of radius ``r`` along ``turns`` turns of a helix (radius 1, pitch 0.3 pi), open
-    at both ends: the side strips of its charts wind past a full turn, so their maps cross
-    themselves."""
-    t = np.linspace(0, 2 * np.pi * turns, k)
-    path = np.stack([np.cos(t), np.sin(t), 0.15 * t], 1)
-    T = np.gradient(path, axis=0)
-    T /= np.linalg.norm(T, axis=1, keepdims=True)
-    N = np.cross(T, [0.0, 0.0, 1.0])
-    N /= np.linalg.norm(N, axis=1, keepdims=True)
-    B = np.cross(T, N)
-    th = np.linspace(0, 2 * np.pi, nu, endpoint=False)
-    V = (path[:, None] + r * (np.cos(th)[None, :, None] * N[:, None]
-                              + np.sin(th)[None, :, None] * B[:, None])).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(k - 1), np.arange(nu), indexing="ij")
-    a0, a1 = i * nu + j, i * nu + (j + 1) % nu
-    F = np.concatenate([np.stack([a0, a1, a0 + nu], -1).reshape(-1, 3),
-                        np.stack([a1, a1 + nu, a0 + nu], -1).reshape(-1, 3)])
-    return jp.TriMesh(V, F)
-
-
 def test_charts_that_still_fold_after_max_splits_are_halved_not_refused(monkeypatch):
     """Past ``max_splits`` rounds the charts that still fold or cross themselves are halved
     (no peeling) until they do not: cow x256 (1.41M faces) was refused after 375 s with 2
@@ -86,7 +65,7 @@ def test_charts_that_still_fold_after_max_splits_are_halved_not_refused(monkeypa
     folded, none overlapping."""
     from test_atlas import check_atlas
 
-    mesh = _helical_tube()
+    mesh = jp.shapes.helical_tube(2.0, 100, 8)
     monkeypatch.setattr(build, "FINAL_HALVINGS", 0)
     with pytest.raises(jp.SolverError, match="still fold over"):
         jp.atlas(mesh, max_splits=0, verbose=False)
