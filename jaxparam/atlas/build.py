@@ -23,7 +23,7 @@ from . import flatten as fl
 from . import lscm
 from . import merge as mg
 from . import notches
-from .pack import min_area_rotation, pack_charts
+from .pack import min_area_rotation, pack_charts, texels_per_cell
 from .result import Atlas, atlas_stats
 
 __all__ = ["atlas"]
@@ -320,6 +320,21 @@ def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspe
 NOTCH_CHOICE_CHARTS = 20
 
 
+#: Ears move into their neighbours' notches only while a face covers at least this many cells
+#: of the packing raster (at 75 % of it, on average): a finer face's ear bends the outline by
+#: less than a cell.  On cow refined 1-to-16 and 1-to-64 (88k, 353k faces: 2.2 and 0.56 cells
+#: a face) the atlas covered 76.08 % with or without the moves, and at 1-to-256 (1.41M faces)
+#: re-minimizing the charts the moves touched took 668 of 1,153 s (session 34, issue 18).
+NOTCH_MIN_CELLS = 4.0
+
+
+def _ears_show(n_faces: int, texture_size: int) -> bool:
+    """Whether a face is large enough on the packing raster for :func:`_notches_filled`
+    (:data:`NOTCH_MIN_CELLS`)."""
+    side = texture_size // texels_per_cell(texture_size)
+    return 0.75 * side * side >= NOTCH_MIN_CELLS * n_faces
+
+
 #: The most charts :func:`atlas` compacts.  Above, the many small charts of a noisy mesh
 #: gain nothing from the cuts, whose second packing is as long as the first: noisy
 #: rocker-arm (1,537 charts) 62.06 -> 62.2 % covered for 109 s, noisy camelhead (1,775) no
@@ -541,12 +556,17 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 max_aspect=float(max_aspect), max_share=float(post_merge_share))
             mark("merge")
         nbr = ch.face_neighbours(t)
+        ears = _ears_show(F.shape[0], int(texture_size))
 
         def layout(c, cuv):
             return _layout(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels))
 
-        filled, filled_uv = _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters,
-                                            float(max_aspect))
+        def notched(c, cuv):
+            if not ears:
+                return c, cuv
+            return _notches_filled(V, F, nbr, c, cuv, en, solver, max_iters, float(max_aspect))
+
+        filled, filled_uv = notched(chart, corner_uv)
         laid = layout(filled, filled_uv)
         if filled is not chart and int(chart.max()) + 1 <= NOTCH_CHOICE_CHARTS:
             plain = layout(chart, corner_uv)
@@ -562,8 +582,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                                                     max_iters, max_new=int(compact * k),
                                                     accept=float(compact_accept))
             if made:
-                chart2, corner_uv2 = _notches_filled(V, F, nbr, chart2, corner_uv2, en, solver,
-                                                     max_iters, float(max_aspect))
+                chart2, corner_uv2 = notched(chart2, corner_uv2)
                 try:
                     laid2 = layout(chart2, corner_uv2)
                 except SolverError:               # the cuts' charts do not fit: keep the

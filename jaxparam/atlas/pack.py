@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import SolverError
 
-__all__ = ["Packing", "MANY_CHARTS", "MANY_CHARTS_STEPS", "min_area_rotation", "min_square_rotation",
+__all__ = ["Packing", "texels_per_cell", "MANY_CHARTS", "MANY_CHARTS_STEPS", "min_area_rotation", "min_square_rotation",
            "rasterize", "pack_charts",
            "place_square", "fill_square", "fill_contact", "grown"]
 
@@ -75,6 +75,16 @@ class Packing:
         R = self.rotation[uv_chart]
         local = np.einsum("nij,nj->ni", R, uv - self.origin[uv_chart])
         return self.scale * local + self.offset[uv_chart]
+
+
+def texels_per_cell(texture_size: int) -> int:
+    """The side ``f`` of a packing raster cell in texels: the largest power of two that
+    divides ``texture_size`` and leaves at least 512 cells a side (``texture_size // f``
+    cells: 512 for a 1024 or 2048 texture)."""
+    f = 1
+    while texture_size // (2 * f) >= 512 and texture_size % (2 * f) == 0:
+        f *= 2
+    return f
 
 
 def _hull(P: np.ndarray) -> np.ndarray:
@@ -560,11 +570,9 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
         Q = uv[ids] @ R.T
         rot[c], origin[c] = R, np.linalg.solve(R, Q.min(0))
         local[ids] = Q - Q.min(0)
-    # the raster: cells of f x f texels, 512 a side for a 1024 texture; a packing of side S <= size
-    # cells maps a cell onto texture_size / S >= f texels, so m cells keep the margin
-    f = 1
-    while texture_size // (2 * f) >= 512 and texture_size % (2 * f) == 0:
-        f *= 2
+    # a packing of side S <= size cells maps a cell onto texture_size / S >= f texels, so m
+    # cells keep the margin
+    f = texels_per_cell(texture_size)
     size, m = texture_size // f, int(np.ceil(margin_texels / f))
     # the charts go into the inner square: m cells of margin at each side of [0, 1]^2 too
     inner = size - 2 * m
