@@ -137,18 +137,35 @@ def chart_overlaps(uv, T, lab) -> int:
         cr = lambda o, p, q: (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (q[:, 0] - o[:, 0])
         d1, d2, d3, d4 = cr(a, b, c), cr(a, b, d), cr(c, d, a), cr(c, d, b)
         crossings = int(np.sum((d1 * d2 < 0) & (d3 * d4 < 0)))
-    # the centroid of one triangle per chart strictly inside a triangle of another chart
+    # the centroid of one triangle per chart strictly inside a triangle of another chart;
+    # the triangles are bucketed on a grid by their bounding boxes (testing every triangle
+    # for every chart ran past 15 minutes on xatlas's ~1M-face atlas, session 34)
     first = np.unique(lab, return_index=True)[1]
     Q = uv[T]
     q = Q[first].mean(1)
-    inside = 0
-    for kk in range(0, len(first), 64):
-        p = q[kk:kk + 64, None, :]
-        s = [(Q[None, :, (t + 1) % 3, 0] - Q[None, :, t, 0]) * (p[..., 1] - Q[None, :, t, 1])
-             - (Q[None, :, (t + 1) % 3, 1] - Q[None, :, t, 1]) * (p[..., 0] - Q[None, :, t, 0]) for t in range(3)]
-        s = np.stack(s, -1)
-        hit = (np.all(s > 0, -1) | np.all(s < 0, -1)) & (lab[None, :] != lab[first[kk:kk + 64], None])
-        inside += int(hit.any(1).sum())
+    tlo, thi = Q.min(1), Q.max(1)
+    cell = max(float(np.median((thi - tlo).max(1))) * 2, 1e-9)
+    lo = np.floor(tlo / cell).astype(np.int64)
+    hi = np.floor(thi / cell).astype(np.int64)
+    cnt = (hi - lo + 1).prod(1)
+    tri = np.repeat(np.arange(len(T)), cnt)
+    k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    wx = (hi - lo + 1)[tri, 0]
+    ck = (lo[tri, 0] + k % wx) * 1000003 + lo[tri, 1] + k // wx
+    o = np.argsort(ck, kind="stable")
+    ck, tri = ck[o], tri[o]
+    qc = np.floor(q / cell).astype(np.int64)
+    qk = qc[:, 0] * 1000003 + qc[:, 1]
+    a0, a1 = np.searchsorted(ck, qk, "left"), np.searchsorted(ck, qk, "right")
+    which = np.repeat(np.arange(len(first)), a1 - a0)
+    cand = tri[np.arange((a1 - a0).sum()) - np.repeat(np.cumsum(a1 - a0) - (a1 - a0), a1 - a0)
+               + np.repeat(a0, a1 - a0)]
+    p = q[which]
+    s = np.stack([(Q[cand, (t + 1) % 3, 0] - Q[cand, t, 0]) * (p[:, 1] - Q[cand, t, 1])
+                  - (Q[cand, (t + 1) % 3, 1] - Q[cand, t, 1]) * (p[:, 0] - Q[cand, t, 0])
+                  for t in range(3)], -1)
+    hit = (np.all(s > 0, -1) | np.all(s < 0, -1)) & (lab[cand] != lab[first[which]])
+    inside = int(np.unique(which[hit]).size)
     return crossings + inside
 
 
