@@ -169,11 +169,10 @@ def test_ears_move_only_where_a_face_spans_raster_cells(monkeypatch):
     calls = []
     real = B._notches_filled
     monkeypatch.setattr(B, "_notches_filled", lambda *a, **k: calls.append(1) or real(*a, **k))
-    coarse = jp.atlas(mesh, verbose=False, texture_size=1024, compact=0)
+    jp.atlas(mesh, verbose=False, texture_size=1024, compact=0)
     assert calls
     calls.clear()
     monkeypatch.setattr(B, "NOTCH_MIN_CELLS", 1e9)
     fine = jp.atlas(mesh, verbose=False, texture_size=1024, compact=0)
     assert not calls
     assert fine.stats.flips == 0 and fine.stats.overlaps == 0 and fine.stats.mirrored == 0
-    assert coarse.n_charts >= 1 and fine.n_charts >= 1

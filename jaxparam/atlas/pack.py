@@ -48,8 +48,8 @@ import numpy as np
 
 from ..errors import SolverError
 
-__all__ = ["Packing", "texels_per_cell", "MANY_CHARTS", "MANY_CHARTS_STEPS", "min_area_rotation", "min_square_rotation",
-           "rasterize", "pack_charts",
+__all__ = ["Packing", "texels_per_cell", "MANY_CHARTS", "MANY_CHARTS_STEPS", "min_area_rotation",
+           "min_square_rotation", "rasterize", "pack_charts",
            "place_square", "fill_square", "fill_contact", "grown"]
 
 
