@@ -99,6 +99,24 @@ def measure(V, F, uv, T) -> dict:
             "border": 1024 * float(min(uv[T].min(), 1 - uv[T].max()))}
 
 
+def _expand(cnt):
+    """``(item, offset)``: each item ``i`` repeated ``cnt[i]`` times, with ``0..cnt[i]-1``."""
+    item = np.repeat(np.arange(len(cnt)), cnt)
+    return item, np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+
+
+def _grid_cells(bmin, bmax, cell):
+    """The grid cells of side ``cell`` that boxes ``[bmin, bmax]`` (``(b, 2)`` each) touch:
+    ``(box (c,), cell key (c,))``, sorted by key."""
+    lo = np.floor(bmin / cell).astype(np.int64)
+    hi = np.floor(bmax / cell).astype(np.int64)
+    box, k = _expand((hi - lo + 1).prod(1))
+    wx = (hi - lo + 1)[box, 0]
+    key = (lo[box, 0] + k % wx) * 1000003 + lo[box, 1] + k // wx
+    o = np.argsort(key, kind="stable")
+    return box[o], key[o]
+
+
 def chart_overlaps(uv, T, lab) -> int:
     """Overlaps between charts, checked without the packer: pairs of boundary edges of
     different charts that cross (grid-bucketed segment tests), plus charts one of whose
@@ -112,16 +130,7 @@ def chart_overlaps(uv, T, lab) -> int:
     E, oc = h[lone], own[lone]
     A, B = uv[E[:, 0]], uv[E[:, 1]]
     cell = max(float(np.median(np.linalg.norm(B - A, axis=1))) * 2, 1e-9)
-    lo = np.floor(np.minimum(A, B) / cell).astype(np.int64)
-    hi = np.floor(np.maximum(A, B) / cell).astype(np.int64)
-    cnt = (hi - lo + 1).prod(1)
-    e = np.repeat(np.arange(len(E)), cnt)
-    k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    wx = (hi - lo + 1)[e, 0]
-    cx, cy = lo[e, 0] + k % wx, lo[e, 1] + k // wx
-    ck = cx * 1000003 + cy
-    o = np.argsort(ck, kind="stable")
-    ck, e = ck[o], e[o]
+    e, ck = _grid_cells(np.minimum(A, B), np.maximum(A, B), cell)
     starts = np.flatnonzero(np.r_[True, ck[1:] != ck[:-1]])
     sizes = np.diff(np.r_[starts, ck.size])
     pairs = []
@@ -145,21 +154,12 @@ def chart_overlaps(uv, T, lab) -> int:
     q = Q[first].mean(1)
     tlo, thi = Q.min(1), Q.max(1)
     cell = max(float(np.median((thi - tlo).max(1))) * 2, 1e-9)
-    lo = np.floor(tlo / cell).astype(np.int64)
-    hi = np.floor(thi / cell).astype(np.int64)
-    cnt = (hi - lo + 1).prod(1)
-    tri = np.repeat(np.arange(len(T)), cnt)
-    k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    wx = (hi - lo + 1)[tri, 0]
-    ck = (lo[tri, 0] + k % wx) * 1000003 + lo[tri, 1] + k // wx
-    o = np.argsort(ck, kind="stable")
-    ck, tri = ck[o], tri[o]
+    tri, ck = _grid_cells(tlo, thi, cell)
     qc = np.floor(q / cell).astype(np.int64)
     qk = qc[:, 0] * 1000003 + qc[:, 1]
     a0, a1 = np.searchsorted(ck, qk, "left"), np.searchsorted(ck, qk, "right")
-    which = np.repeat(np.arange(len(first)), a1 - a0)
-    cand = tri[np.arange((a1 - a0).sum()) - np.repeat(np.cumsum(a1 - a0) - (a1 - a0), a1 - a0)
-               + np.repeat(a0, a1 - a0)]
+    which, at = _expand(a1 - a0)
+    cand = tri[a0[which] + at]
     p = q[which]
     s = np.stack([(Q[cand, (t + 1) % 3, 0] - Q[cand, t, 0]) * (p[:, 1] - Q[cand, t, 1])
                   - (Q[cand, (t + 1) % 3, 1] - Q[cand, t, 1]) * (p[:, 0] - Q[cand, t, 0])
