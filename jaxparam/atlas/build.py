@@ -555,8 +555,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 cone=float(post_merge_cone), budget=float(post_merge_budget),
                 max_aspect=float(max_aspect), max_share=float(post_merge_share))
             mark("merge")
-        nbr = ch.face_neighbours(t)
         ears = _ears_show(F.shape[0], int(texture_size))
+        nbr = ch.face_neighbours(t) if ears else None
 
         def layout(c, cuv):
             return _layout(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels))
