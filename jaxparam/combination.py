@@ -241,4 +241,6 @@ def _tangent_rhs(w, dw, uv_fixed, du, x, row, nbr, fx, fixed_slot, *, normalize,
 def scatter(x, uv_fixed, free, fixed, *, n: int):
     """``(n, 2)`` UVs: ``x`` at the ``free`` vertices, ``uv_fixed`` at the ``fixed`` ones, nan elsewhere."""
     uv = jnp.full((n, 2), jnp.nan, x.dtype)
-    return uv.at[free].set(x).at[fixed].set(uv_fixed)
+    # Disjoint, duplicate-free index sets: unique_indices spares the JVP of .set its scatter of
+    # update ids (which decides between colliding writes), in every map's gradient (issue 12).
+    return uv.at[free].set(x, unique_indices=True).at[fixed].set(uv_fixed, unique_indices=True)

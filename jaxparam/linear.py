@@ -64,7 +64,7 @@ def solve_interior(topology, w, boundary_uv, *, symmetric: bool = False, backend
 def _boundary_slots(V, loop, loop_slot, user_uv, *, shape, spacing, corners, nb):
     """The boundary map of the loop, as UVs in ``topology.boundary`` slot order ``(nb, 2)``."""
     uv_loop = _boundary_only(V, loop, user_uv, shape, spacing, corners)
-    return jnp.zeros((nb, 2), V.dtype).at[loop_slot].set(uv_loop)
+    return jnp.zeros((nb, 2), V.dtype).at[loop_slot].set(uv_loop, unique_indices=True)
 
 
 def _boundary_key(boundary, k: int):

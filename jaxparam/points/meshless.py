@@ -296,7 +296,7 @@ def map_points(P, graph: PointGraph, bnd: np.ndarray, *, weights: str, boundary:
     if E.n_rows == 0:       # every point is on the boundary polygon: nothing to solve for
         Pj = P if isinstance(P, jax.core.Tracer) else jnp.asarray(P, dtype=jnp.float64)
         uv_b = _boundary_map(Pj, jax.device_put(bnd), boundary=boundary, spacing=spacing)
-        U = jnp.zeros((N, 2)).at[jax.device_put(bnd)].set(uv_b)
+        U = jnp.zeros((N, 2)).at[jax.device_put(bnd)].set(uv_b, unique_indices=True)
         return np.asarray(U) if host and wts.is_concrete(P) else U
     slot = np.full(N, -1, np.int64)
     slot[E.free] = np.arange(E.n_rows)
