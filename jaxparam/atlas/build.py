@@ -29,18 +29,33 @@ from .result import Atlas, atlas_stats
 __all__ = ["atlas"]
 
 
-def _flatten_subset(V, F, chart, faces_idx, en, start, weights, solver, max_iters):
+def _flatten_subset(V, F, chart, faces_idx, en, start, weights, solver, max_iters, prev=None):
     """Flatten the charts of the faces ``faces_idx``: per-corner UVs ``(k, 3, 2)`` and the
-    per-chart quality (indexed by the subset's chart order)."""
+    per-chart quality (indexed by the subset's chart order).  ``prev``: ``(corner_uv (m, 3,
+    2), chart (m,))`` of the round before; the large pieces of its charts start from its map
+    (:func:`~jaxparam.atlas.flatten.warm_charts`), as a problem of their own: they take a few
+    Newton steps where the new pieces take their usual course, and one problem takes as many
+    steps as its slowest chart."""
     labels, sub_chart = np.unique(chart[faces_idx], return_inverse=True)
-    cm = fl.chart_mesh(V, F[faces_idx], sub_chart)
-    if start == "conformal":
-        uv0 = lscm.conformal_start(cm, weights=weights)
-    else:
-        uv0 = fl.convex_start(cm, weights=weights)
-    uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters)
-    q = fl.chart_quality(cm, uv)
-    return uv[cm.mesh.faces], labels, q
+    warm = np.zeros(labels.size, bool)
+    if prev is not None:
+        warm = fl.warm_charts(sub_chart, prev[0][faces_idx], prev[1][faces_idx], np.bincount(prev[1]))
+    cuv, q = np.zeros((faces_idx.size, 3, 2)), {}
+    for group in (warm, ~warm):
+        if not group.any():
+            continue
+        on = group[sub_chart]
+        cm = fl.chart_mesh(V, F[faces_idx[on]], np.unique(sub_chart[on], return_inverse=True)[1])
+        uv0 = (lscm.conformal_start(cm, weights=weights) if start == "conformal"
+               else fl.convex_start(cm, weights=weights))
+        cold = None
+        if group is warm:
+            uv0, cold = fl.warm_uv(cm, uv0, prev[0][faces_idx[on]]), uv0
+        uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters, cold=cold)
+        cuv[on] = uv[cm.mesh.faces]
+        for key, value in fl.chart_quality(cm, uv).items():
+            q.setdefault(key, np.zeros(labels.size, value.dtype))[group] = value
+    return cuv, labels, q
 
 
 #: A chart whose map crosses its own boundary gives the faces at the crossing edges' ends, and
@@ -510,13 +525,15 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         adj_csr = ch.face_csr(t)
         corner_uv = np.zeros((F.shape[0], 3, 2))
         todo = np.arange(F.shape[0])
+        prev = None
         splits = 0
         overlaps = 0
         last = max_splits + FINAL_HALVINGS
         for round_ in range(last + 1):
             if round_:
                 mark.note(f"flatten, split round {round_}")
-            cuv, labels, q = _flatten_subset(V, F, chart, todo, en, start, weights, solver, max_iters)
+            cuv, labels, q = _flatten_subset(V, F, chart, todo, en, start, weights, solver, max_iters,
+                                             prev)
             corner_uv[todo] = cuv
             bad = (q["flips"] > 0) | (q["overlaps"] > 0)
             if round_ < max_splits:
@@ -527,6 +544,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                 raise SolverError(
                     f"atlas: {int(bad.sum())} charts still fold over after {last} rounds of "
                     "splits; raise max_splits or lower cone.", stage="atlas")
+            prev = (corner_uv, chart.copy())   # corner_uv is not written before the next flatten
             nxt = int(chart.max()) + 1
             redo = []
             for c in labels[bad]:

@@ -23,12 +23,18 @@ from .. import combination as comb
 from .. import host
 from .. import linear
 from .. import metrics
+from .. import tol
 from .. import topology as topo
 from .. import weights as wts
 from ..mesh import TriMesh
 from ..optimize import Problem, StopRules, solver_from
 
-__all__ = ["ChartMesh", "chart_mesh", "convex_start", "minimize_charts", "chart_quality"]
+__all__ = ["ChartMesh", "chart_mesh", "convex_start", "minimize_charts", "chart_quality",
+           "warm_charts", "warm_uv"]
+
+#: A chart of a split round starts from its parent's map (:func:`warm_charts`) when it holds at
+#: least this share of the parent's faces.
+WARM_MIN_SHARE = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,15 +115,60 @@ def rescale(cm: ChartMesh, uv: np.ndarray) -> np.ndarray:
 
 
 def minimize_charts(cm: ChartMesh, energy, uv0: np.ndarray, *, solver="newton",
-                    max_iters: int = 200, max_seconds: float | None = None):
+                    max_iters: int = 200, max_seconds: float | None = None, cold=None):
     """Minimize ``energy`` (a :class:`~jaxparam.Energy`) over every chart at once, free
     boundary, flip-free, from ``uv0 (n_uv, 2)`` (one-to-one chart by chart); each chart
     takes its own step (:attr:`Problem.blocks <jaxparam.optimize.Problem>`).
+
+    ``cold (n_uv, 2)``: where the charts would have started without ``uv0``'s earlier maps
+    (:func:`warm_charts`).  The run then stops at the gradient norm where a run from ``cold``
+    would (``GRAD_RTOL`` of the gradient there): relative to the warm start's gradient, which
+    is already small, that rule never fired, and a warm start took as many slow steps as a
+    cold one until the energy rule stopped it (issue 18).
     **Returns:** ``(uv (n_uv, 2), SolveResult)``."""
     prob = Problem(cm.mesh, energy, True, uv0, face_blocks=cm.chart)
-    res = solver_from(solver).run(prob, StopRules(max_iters=max_iters, max_seconds=max_seconds),
-                                  verbose=False)
+    grad_rtol = tol.GRAD_RTOL
+    if cold is not None:
+        g_cold = np.linalg.norm(prob.value_and_grad(np.asarray(cold)[prob.free].reshape(-1))[1])
+        g_warm = np.linalg.norm(prob.value_and_grad(np.asarray(prob.x0))[1])
+        if np.isfinite(g_cold) and g_warm > 0:
+            grad_rtol = min(1.0, tol.GRAD_RTOL * g_cold / g_warm)
+    stop = StopRules(max_iters=max_iters, max_seconds=max_seconds, grad_rtol=grad_rtol)
+    res = solver_from(solver).run(prob, stop, verbose=False)
     return np.array(prob.uv(res.x)), res
+
+
+def warm_charts(chart: np.ndarray, corner_uv: np.ndarray, parent: np.ndarray,
+                parent_faces: np.ndarray, *, min_share: float = WARM_MIN_SHARE) -> np.ndarray:
+    """``(k,) bool``: which of the charts ``chart (m,)`` (labels ``0..k-1``) can start from an
+    earlier round's map.
+
+    **Arguments:** ``corner_uv (m, 3, 2)`` the earlier map at the faces' corners; ``parent
+    (m,)`` each face's chart in that round; ``parent_faces`` the face count of each of those
+    charts (indexed by ``parent``).  A chart starts warm when all its faces come from one
+    earlier chart, hold at least ``min_share`` of it, and the earlier map inverts none of
+    them: the piece that keeps most of a split chart starts where its minimization ended,
+    not from a new conformal map (issue 18: the split rounds were most of the atlas's time
+    on fine meshes)."""
+    k = int(chart.max()) + 1
+    lo = np.full(k, np.iinfo(np.int64).max)
+    hi = np.full(k, -1)
+    np.minimum.at(lo, chart, parent)
+    np.maximum.at(hi, chart, parent)
+    warm = lo == hi
+    size = np.bincount(chart, minlength=k)
+    warm[warm] = size[warm] >= min_share * np.asarray(parent_faces)[lo[warm]]
+    e1, e2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
+    inverted = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
+    return warm & (np.bincount(chart, weights=inverted, minlength=k) == 0)
+
+
+def warm_uv(cm: ChartMesh, uv0: np.ndarray, corner_uv: np.ndarray) -> np.ndarray:
+    """``(n_uv, 2)``: the UVs that ``corner_uv (m, 3, 2)`` gives the corners of ``cm``'s faces
+    (one map per chart, so a UV vertex's corners agree)."""
+    uv = np.array(uv0, np.float64)
+    uv[cm.mesh.faces.reshape(-1)] = corner_uv.reshape(-1, 2)
+    return uv
 
 
 def chart_quality(cm: ChartMesh, uv: np.ndarray) -> dict:
