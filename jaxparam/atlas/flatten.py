@@ -27,6 +27,7 @@ from .. import tol
 from .. import topology as topo
 from .. import weights as wts
 from ..mesh import TriMesh
+from ..triangles import doubled_areas
 from ..optimize import Problem, StopRules, solver_from
 
 __all__ = ["ChartMesh", "chart_mesh", "convex_start", "minimize_charts", "chart_quality",
@@ -158,8 +159,7 @@ def warm_charts(chart: np.ndarray, corner_uv: np.ndarray, parent: np.ndarray,
     warm = lo == hi
     size = np.bincount(chart, minlength=k)
     warm[warm] = size[warm] >= min_share * np.asarray(parent_faces)[lo[warm]]
-    e1, e2 = corner_uv[:, 1] - corner_uv[:, 0], corner_uv[:, 2] - corner_uv[:, 0]
-    inverted = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
+    inverted = doubled_areas(corner_uv) <= 0
     return warm & (np.bincount(chart, weights=inverted, minlength=k) == 0)
 
 
