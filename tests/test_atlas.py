@@ -14,7 +14,7 @@ import pytest
 import jaxparam as jp
 from jaxparam import topology as topo
 from jaxparam.errors import SolverError
-from jaxparam.atlas import atlas, atlas_uv, chart_pieces, pack
+from jaxparam.atlas import atlas, atlas_uv, chart_pieces, pack, raster
 from jaxparam.atlas import charts as ch
 from conftest import data_path
 
@@ -280,7 +280,7 @@ def test_place_square_fills_holes_and_keeps_margins():
     cap = 120
     placed = []
     for c, M in enumerate(masks):
-        Mt = pack._turns(M)[turn[c]][0]
+        Mt = raster.proper_turns(M)[turn[c]][0]
         G = np.zeros((cap, cap), bool)
         i, j = pos[c]
         G[j:j + Mt.shape[0], i:i + Mt.shape[1]] = Mt
@@ -296,7 +296,7 @@ def test_place_square_fills_holes_and_keeps_margins():
     # the U's cavity holds at least one blob: cells inside the U's box but not the U
     cavity = np.zeros((cap, cap), bool)
     i, j = pos[0]
-    Ut = pack._turns(U)[turn[0]][0]
+    Ut = raster.proper_turns(U)[turn[0]][0]
     cavity[j:j + Ut.shape[0], i:i + Ut.shape[1]] = ~Ut
     assert np.any(occupied & cavity)
     total = sum(int(M.sum()) for M in masks)
@@ -316,7 +316,7 @@ def test_fill_square_is_bottom_left_and_keeps_margins():
     st = np.ones((2 * margin + 1, 2 * margin + 1), bool)
 
     def grid(c, dj=0):
-        Mt = pack._turns(masks[c])[turn[c]][0]
+        Mt = raster.proper_turns(masks[c])[turn[c]][0]
         i, j = pos[c]
         G = np.zeros((size + 1, size), bool)
         assert 0 <= i and i + Mt.shape[1] <= size and 0 <= j and j + Mt.shape[0] <= size, c
@@ -353,7 +353,7 @@ def test_fill_contact_keeps_margins_and_turns_and_touches():
     st = np.ones((2 * margin + 1, 2 * margin + 1), bool)
     placed = []
     for c, M in enumerate(masks):
-        Mt = pack._turns(M)[turn[c]][0]
+        Mt = raster.proper_turns(M)[turn[c]][0]
         assert np.array_equal(Mt, np.rot90(M, k=[0, -1, 2, 1][turn[c]]))
         i, j = pos[c]
         assert 0 <= i and i + Mt.shape[1] <= size and 0 <= j and j + Mt.shape[0] <= size, c
@@ -717,7 +717,7 @@ def test_energies_with_no_free_minimum_are_refused(energy):
 
 
 def test_turned_correlations_match_direct_ones():
-    """pack._correlations takes the 180-degree turns' correlations from the unturned masks'
+    """raster.correlations takes the 180-degree turns' correlations from the unturned masks'
     spectra (convolutions): every valid position must hold the direct correlation's count."""
     from scipy import signal
 
@@ -726,13 +726,13 @@ def test_turned_correlations_match_direct_ones():
     shape = (64, 64)
     F_occ = np.fft.rfft2(occ, shape)
     M = rng.random((9, 5)) < 0.6
-    turns = [t[0] for t in pack._turns(M)]
-    got = pack._correlations(F_occ, turns, shape)
+    turns = [t[0] for t in raster.proper_turns(M)]
+    got = raster.correlations(F_occ, turns, shape)
     for T, g in zip(turns, got):
         h, w = T.shape
         want = signal.correlate(occ, T.astype(np.float32), mode="valid")   # (61-h+1, 61-w+1)
         np.testing.assert_allclose(g[:want.shape[0], :want.shape[1]], want, atol=1e-3)
-    skipped = pack._correlations(F_occ, [None, turns[1], None, turns[3]], shape)
+    skipped = raster.correlations(F_occ, [None, turns[1], None, turns[3]], shape)
     assert skipped[0] is None and skipped[2] is None
     np.testing.assert_allclose(skipped[3], got[3], atol=1e-3)
 

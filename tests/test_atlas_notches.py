@@ -141,8 +141,8 @@ def test_few_charts_keep_the_layout_that_covers_more(monkeypatch):
     covers = []
     real = B._layout
 
-    def spy(chart, *args):
-        out = real(chart, *args)
+    def spy(chart, *args, **kwargs):
+        out = real(chart, *args, **kwargs)
         covers.append((int(chart.max()) + 1, out[-1]))
         return out
 

@@ -23,7 +23,7 @@ from . import flatten as fl
 from . import lscm
 from . import merge as mg
 from . import notches
-from .pack import min_area_rotation, pack_charts, texels_per_cell
+from .pack import min_area_rotation, pack_charts, reorder, texels_per_cell
 from .result import Atlas, atlas_stats
 
 __all__ = ["atlas"]
@@ -93,10 +93,13 @@ def _peeled_or_halved(V, F, faces_of, corner_uv, adj_csr, peel: bool = True) -> 
     return ch.split_chart(faces_of, adj_csr, merge_small=True)
 
 
-def _layout(chart, corner_uv, F, n, texture_size, margin_texels, refine_steps: int = 6):
+def _layout(chart, corner_uv, F, n, texture_size, margin_texels, refine_steps: int = 6,
+            reordered=None):
     """One UV vertex per (chart, vertex), the charts packed (``refine_steps``: the packing's
-    bisection steps, :func:`~jaxparam.atlas.pack.pack_charts`): ``(uv_faces, vertex,
-    uv_chart, chart_uv, packing, uv, coverage)``."""
+    bisection steps, :func:`~jaxparam.atlas.pack.pack_charts`; ``reordered``: instead, a
+    packing of these charts to improve by :data:`FINAL_ORDERS` orders of placement,
+    :func:`~jaxparam.atlas.pack.reorder`): ``(uv_faces, vertex, uv_chart, chart_uv, packing,
+    uv, coverage)``."""
     key = np.repeat(chart, 3) * np.int64(n) + F.reshape(-1)
     uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
     uv_faces = inv.reshape(-1, 3).astype(np.int64)
@@ -106,8 +109,9 @@ def _layout(chart, corner_uv, F, n, texture_size, margin_texels, refine_steps: i
     T = chart_uv[uv_faces]
     e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
     a_uv = 0.5 * float(np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
-    packing = pack_charts(chart_uv, uv_faces, chart, uv_chart, a_uv, texture_size=texture_size,
-                          margin_texels=margin_texels, refine_steps=refine_steps)
+    packing = (reorder(chart_uv, uv_faces, chart, uv_chart, reordered, FINAL_ORDERS) if reordered is not None
+               else pack_charts(chart_uv, uv_faces, chart, uv_chart, a_uv, texture_size=texture_size,
+                                margin_texels=margin_texels, refine_steps=refine_steps))
     uv = np.clip(packing.apply(chart_uv, uv_chart), 0.0, 1.0)    # rounding at the borders
     return uv_faces, vertex, uv_chart, chart_uv, packing, uv, a_uv * packing.scale ** 2
 
@@ -333,6 +337,12 @@ def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspe
 #: for 2.2 s more).  At 64, 3holes and bunny (39 and 37 charts) packed a second time for the
 #: same coverage (+4-5 s), bumpy (16) too (+1 s).
 NOTCH_CHOICE_CHARTS = 20
+#: The last packing of at most :data:`ORDER_CHARTS` charts is tried again at larger scales in
+#: this many orders of placement near largest first (:func:`~jaxparam.atlas.pack.reorder`);
+#: the charts are chosen on packings without them.  Each order is a fill of every chart, so
+#: the many charts of a noisy or refined mesh would take tens of seconds.
+FINAL_ORDERS = 4
+ORDER_CHARTS = 150
 
 
 #: Ears move into their neighbours' notches only while a face covers at least this many cells
@@ -437,7 +447,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
     - ``weights``, ``solver``, ``max_iters``: the convex-combination start's weights and
       the minimization's solver and iteration cap.
     - ``verbose``: a progress bar over the stages (charts, flatten and its split rounds,
-      merge, pack, compact); ``None``: as ``jp.config.progress`` says (it shows for runs
+      merge, pack, compact, orders); ``None``: as ``jp.config.progress`` says (it shows for runs
       longer than a second).
 
     **Returns:** an :class:`~jaxparam.atlas.Atlas` (``uv (n_uv, 2)``, ``uv_faces (m, 3)``,
@@ -513,7 +523,7 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                         "default) or arap.")
     t0 = time.perf_counter()
     clock = StageClock()
-    mark = StageBar(clock, total=3 + (post_merge_budget > 0) + (compact > 0), desc="atlas",
+    mark = StageBar(clock, total=4 + (post_merge_budget > 0) + (compact > 0), desc="atlas",
                     verbose=verbose)
     try:
         V = np.asarray(mesh.vertices, np.float64)
@@ -576,8 +586,9 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         ears = _ears_show(F.shape[0], int(texture_size))
         nbr = ch.face_neighbours(t) if ears else None
 
-        def layout(c, cuv):
-            return _layout(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels))
+        def layout(c, cuv, reordered=None):
+            return _layout(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels),
+                           reordered=reordered)
 
         def notched(c, cuv):
             if not ears:
@@ -625,6 +636,9 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
                     break
                 chart, corner_uv, laid = cut[0], cut[1], laid2
             mark("compact")
+        if int(chart.max()) + 1 <= ORDER_CHARTS:   # the same charts: it never covers less
+            laid = max(laid, layout(chart, corner_uv, laid[4]), key=lambda lay: lay[-1])
+        mark("orders")
     finally:
         mark.close()
     uv_faces, vertex, uv_chart, chart_uv, packing, uv, _ = laid
