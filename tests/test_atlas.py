@@ -549,6 +549,9 @@ def test_atlas_refuses_bad_input():
         atlas(mesh, cone=200)
     with pytest.raises(jp.MeshError, match="merge_cone"):
         atlas(mesh, merge_cone=0.0)
+    for bad in (1.0, 0.5, -2.0, float("nan")):      # s1/s2 >= 1: every chart would split to triangles
+        with pytest.raises(jp.MeshError, match="max_aspect .* must be above 1"):
+            atlas(mesh, max_aspect=bad)
     with pytest.raises(jp.MeshError, match="small_merge_cone"):
         atlas(mesh, small_merge_cone=180.0)
     for kw in ({"post_merge_budget": -0.1}, {"post_merge_cone": 0.0}, {"post_merge_share": 1.5}):

@@ -496,6 +496,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         raise MeshError(f"atlas: start must be 'conformal' or 'convex', got {start!r}.")
     if not 0 < cone < 180:
         raise MeshError(f"atlas: cone must be an angle in (0, 180) degrees, got {cone}.")
+    if not max_aspect > 1:      # s1/s2 >= 1: at 1 or below every chart splits to single triangles
+        raise MeshError(f"atlas: max_aspect bounds s1/s2 >= 1 and must be above 1 (default 3.5), got {max_aspect}.")
     if merge_cone is not None and not 0 < merge_cone < 180:
         raise MeshError(f"atlas: merge_cone must be an angle in (0, 180) degrees or None, got {merge_cone}.")
     if small_merge_cone is not None and not 0 < small_merge_cone < 180:
