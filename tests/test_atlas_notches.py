@@ -139,14 +139,14 @@ def test_few_charts_keep_the_layout_that_covers_more(monkeypatch):
     B = importlib.import_module("jaxparam.atlas.build")
     mesh = jp.shapes.sphere(3)
     covers = []
-    real = B._layout
+    real = B.layout_charts
 
     def spy(chart, *args, **kwargs):
         out = real(chart, *args, **kwargs)
         covers.append((int(chart.max()) + 1, out[-1]))
         return out
 
-    monkeypatch.setattr(B, "_layout", spy)
+    monkeypatch.setattr(B, "layout_charts", spy)
     chosen = jp.atlas(mesh, verbose=False)
     filled, plain = covers[:2]                          # the first two: before compaction
     assert filled[0] <= B.NOTCH_CHOICE_CHARTS and filled[1] != plain[1]

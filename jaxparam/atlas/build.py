@@ -23,7 +23,7 @@ from . import flatten as fl
 from . import lscm
 from . import merge as mg
 from . import notches
-from .pack import min_area_rotation, pack_charts, reorder, texels_per_cell
+from .pack import ORDER_CHARTS, layout_charts, min_area_rotation, texels_per_cell
 from .result import Atlas, atlas_stats
 
 __all__ = ["atlas"]
@@ -93,29 +93,6 @@ def _peeled_or_halved(V, F, faces_of, corner_uv, adj_csr, peel: bool = True) -> 
     return ch.split_chart(faces_of, adj_csr, merge_small=True)
 
 
-def _layout(chart, corner_uv, F, n, texture_size, margin_texels, refine_steps: int = 6,
-            reordered=None):
-    """One UV vertex per (chart, vertex), the charts packed (``refine_steps``: the packing's
-    bisection steps, :func:`~jaxparam.atlas.pack.pack_charts`; ``reordered``: instead, a
-    packing of these charts to improve by :data:`FINAL_ORDERS` orders of placement,
-    :func:`~jaxparam.atlas.pack.reorder`): ``(uv_faces, vertex, uv_chart, chart_uv, packing,
-    uv, coverage)``."""
-    key = np.repeat(chart, 3) * np.int64(n) + F.reshape(-1)
-    uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
-    uv_faces = inv.reshape(-1, 3).astype(np.int64)
-    vertex = uniq % n
-    uv_chart = uniq // n
-    chart_uv = corner_uv.reshape(-1, 2)[first]
-    T = chart_uv[uv_faces]
-    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
-    a_uv = 0.5 * float(np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
-    packing = (reorder(chart_uv, uv_faces, chart, uv_chart, reordered, FINAL_ORDERS) if reordered is not None
-               else pack_charts(chart_uv, uv_faces, chart, uv_chart, a_uv, texture_size=texture_size,
-                                margin_texels=margin_texels, refine_steps=refine_steps))
-    uv = np.clip(packing.apply(chart_uv, uv_chart), 0.0, 1.0)    # rounding at the borders
-    return uv_faces, vertex, uv_chart, chart_uv, packing, uv, a_uv * packing.scale ** 2
-
-
 def _compact(V, F, chart, corner_uv, adj_csr, en, solver, max_iters, *, max_new, accept):
     """Cut charts into more convex pieces (:func:`~jaxparam.atlas.compact.plan_splits`) and
     minimize every piece again from its parent's map (:func:`_pieces_minimized`).
@@ -176,9 +153,11 @@ def _largest_aspect(V, F, corner_uv) -> float:
 def _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters, *,
                       ceiling: float = 0.0):
     """The cut charts' pieces (``new (m,)`` labels, ``parent`` each label's chart before the
-    cuts) minimized again from their parent's map, in one problem.  A parent's cuts are
-    undone when one of its pieces' maps flips, crosses itself, raises the energy, or raises
-    the largest ``s1/s2`` above both the parent's and ``ceiling``.
+    cuts) minimized again from their parent's map, in one problem.  A piece whose map then
+    flips, crosses itself, raises the energy, or raises the largest ``s1/s2`` above both the
+    parent's and ``ceiling`` keeps its start, the parent's map on it (until session 36 the
+    parent's cuts were undone: a 20x stretched camelhead's longest chart stayed whole, and
+    the atlas covered 18 %).
     **Returns:** ``(chart, corner_uv, new charts)``."""
     k0 = int(chart.max()) + 1
     if parent.size == k0:
@@ -197,12 +176,13 @@ def _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters
     worst = np.maximum(worst, float(ceiling))
     bad = ((q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > worst[fam] * (1 + 1e-9))
            | (q["sym_dirichlet"] > q0["sym_dirichlet"] * (1 + 1e-12)))
-    undo = np.isin(fam, fam[bad])
-    keep = ~undo[sub]
+    # such a piece keeps its start, the parent's map on it: one-to-one, as the parent's is
+    back = np.unique(cm.mesh.faces[bad[sub]])
+    uv[back] = uv0[back]
     chart = chart.copy()
     corner_uv = corner_uv.copy()
-    chart[todo[keep]] = new[todo[keep]]
-    corner_uv[todo[keep]] = uv[cm.mesh.faces[keep]]
+    chart[todo] = new[todo]
+    corner_uv[todo] = uv[cm.mesh.faces]
     made = int(np.unique(chart).size) - k0
     return ch.relabel(chart), corner_uv, made
 
@@ -284,7 +264,7 @@ def _widest_cut(V, F, chart, corner_uv, adj_csr, en, solver, max_iters):
         new = chart.copy()
         new[fk[sides[i]]] = k
         try:
-            score = _layout(new, corner_uv, F, n, PACKING_CUT_TEXELS, 1, PACKING_CUT_STEPS)[-1]
+            score = layout_charts(new, corner_uv, F, n, PACKING_CUT_TEXELS, 1, PACKING_CUT_STEPS)[-1]
         except SolverError:
             continue
         if best is None or score > best[0]:
@@ -337,12 +317,6 @@ def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspe
 #: for 2.2 s more).  At 64, 3holes and bunny (39 and 37 charts) packed a second time for the
 #: same coverage (+4-5 s), bumpy (16) too (+1 s).
 NOTCH_CHOICE_CHARTS = 20
-#: The last packing of at most :data:`ORDER_CHARTS` charts is tried again at larger scales in
-#: this many orders of placement near largest first (:func:`~jaxparam.atlas.pack.reorder`);
-#: the charts are chosen on packings without them.  Each order is a fill of every chart, so
-#: the many charts of a noisy or refined mesh would take tens of seconds.
-FINAL_ORDERS = 4
-ORDER_CHARTS = 150
 
 
 #: Ears move into their neighbours' notches only while a face covers at least this many cells
@@ -589,8 +563,8 @@ def atlas(mesh: TriMesh, *, energy="symmetric_dirichlet", texture_size: int = 10
         nbr = ch.face_neighbours(t) if ears else None
 
         def layout(c, cuv, reordered=None):
-            return _layout(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels),
-                           reordered=reordered)
+            return layout_charts(c, cuv, F, t.n_vertices, int(texture_size), int(margin_texels),
+                                 reordered=reordered)
 
         def notched(c, cuv):
             if not ears:

@@ -118,6 +118,42 @@ def _connected(sub: sp.csr_matrix, keep: np.ndarray) -> bool:
     return connected_components(sub[idx][:, idx], directed=False)[0] == 1
 
 
+def joined_slabs(sub: sp.csr_matrix, slab: np.ndarray, passes: int = 8,
+                 tip_share: float = 0.25) -> np.ndarray:
+    """``slab (f,)`` labels of a chart's faces (``sub (f, f)`` their adjacency) with the tips
+    joined: each slab keeps its largest face-connected piece, and a face of another piece
+    holding under ``tip_share`` of its slab's faces takes the slab of a neighbour in a kept
+    piece, pass after pass (a slab cut by a ragged outline leaves tips across the line, which
+    belong with the slab beside them).  Larger pieces (a hairpin's other arm) and faces still
+    unjoined after ``passes`` keep their label, which the caller's checks refuse."""
+    from scipy.sparse.csgraph import connected_components
+
+    slab = slab.copy()
+    rows, cols = sub.nonzero()
+    for _ in range(passes):
+        same = slab[rows] == slab[cols]
+        g = sp.csr_matrix((np.ones(int(same.sum())), (rows[same], cols[same])), shape=sub.shape)
+        n, piece = connected_components(g, directed=False)
+        size = np.bincount(piece, minlength=n)
+        # the largest piece of each slab (ties: the lowest piece id)
+        piece_slab = np.empty(n, np.int64)
+        piece_slab[piece] = slab
+        order = np.lexsort((np.arange(n), -size, piece_slab))
+        lead = order[np.r_[True, piece_slab[order][1:] != piece_slab[order][:-1]]]
+        best = np.full(int(slab.max()) + 1, -1)
+        best[piece_slab[lead]] = lead
+        kept = best[slab] == piece
+        tip = ~kept & (size[piece] < tip_share * np.bincount(slab)[slab])
+        if not tip.any():
+            break
+        # a tip's face with a kept neighbour takes that neighbour's slab
+        edge = tip[rows] & kept[cols]
+        take = np.full(slab.size, -1)
+        take[rows[edge]] = slab[cols[edge]]
+        slab = np.where(take >= 0, take, slab)
+    return slab
+
+
 def best_cut(corner_uv: np.ndarray, faces: np.ndarray, sub_adj: sp.csr_matrix,
              *, accept: float = 0.9, min_faces: int = 2):
     """The best straight cut of one flattened chart.
@@ -267,7 +303,7 @@ def plan_strips(corner_uv: np.ndarray, faces: np.ndarray, chart: np.ndarray, adj
         """Slab labels ``(f,)`` of coordinate ``t`` (from 0 at the chart's end to ``length``)
         along the chart, or None (not all disks)."""
         n = int(np.ceil(length / limit))
-        slab = np.clip((t / length * n).astype(np.int64), 0, n - 1)
+        slab = joined_slabs(sub, np.clip((t / length * n).astype(np.int64), 0, n - 1))
         ok = all((slab == j).any() and _connected(sub, slab == j) and faces_are_disk(faces[fk[slab == j]])
                  for j in range(n))
         return slab if ok else None

@@ -52,7 +52,8 @@ from .raster import correlations, grown, lowest_inside, paint, proper_turns, ras
 
 __all__ = ["Packing", "texels_per_cell", "MANY_CHARTS", "MANY_CHARTS_STEPS", "jittered_orders", "min_area_rotation",
            "min_square_rotation", "rasterize", "pack_charts",
-           "place_square", "fill_square", "fill_contact", "grown", "reorder", "ORDER_GAIN", "ORDER_STEPS"]
+           "place_square", "fill_square", "fill_contact", "grown", "reorder", "ORDER_GAIN", "ORDER_STEPS", "layout_charts",
+           "FINAL_ORDERS", "ORDER_CHARTS"]
 
 
 @dataclass(frozen=True)
@@ -419,3 +420,37 @@ def pack_charts(uv, uv_faces, chart, uv_chart, area3d, *, texture_size: int = 10
             best = (s / size, s, masks, placed)
     scale, _, masks, placed = best
     return _packing(rot, origin, masks, placed, scale, m, texture_size, margin_texels, attempt)
+
+
+#: The atlas's last packing of at most :data:`ORDER_CHARTS` charts is tried again at larger
+#: scales in this many orders of placement near largest first (:func:`reorder`); the charts
+#: are chosen on packings without them.  Each order is a fill of every chart, so
+#: the many charts of a noisy or refined mesh would take tens of seconds.
+FINAL_ORDERS = 4
+ORDER_CHARTS = 200
+
+
+def layout_charts(chart, corner_uv, F, n, texture_size, margin_texels, refine_steps: int = 6,
+                  reordered=None):
+    """The atlas of flattened charts (``chart (m,)``, ``corner_uv (m, 3, 2)`` at 3D scale, of
+    the faces ``F (m, 3)`` of ``n`` vertices): one UV vertex per (chart, vertex), the charts
+    packed (``refine_steps``: the bisection steps of :func:`pack_charts`; ``reordered``:
+    instead, a packing of these charts that :func:`reorder` improves in
+    :data:`FINAL_ORDERS` orders).  **Returns:** ``(uv_faces, vertex, uv_chart, chart_uv,
+    packing, uv, coverage)``."""
+    key = np.repeat(chart, 3) * np.int64(n) + F.reshape(-1)
+    uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    uv_faces = inv.reshape(-1, 3).astype(np.int64)
+    vertex = uniq % n
+    uv_chart = uniq // n
+    chart_uv = corner_uv.reshape(-1, 2)[first]
+    T = chart_uv[uv_faces]
+    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+    a_uv = 0.5 * float(np.sum(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))
+    if reordered is not None:
+        packing = reorder(chart_uv, uv_faces, chart, uv_chart, reordered, FINAL_ORDERS)
+    else:
+        packing = pack_charts(chart_uv, uv_faces, chart, uv_chart, a_uv, texture_size=texture_size,
+                              margin_texels=margin_texels, refine_steps=refine_steps)
+    uv = np.clip(packing.apply(chart_uv, uv_chart), 0.0, 1.0)    # rounding at the borders
+    return uv_faces, vertex, uv_chart, chart_uv, packing, uv, a_uv * packing.scale ** 2
