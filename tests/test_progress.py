@@ -93,7 +93,7 @@ def test_minimize_follows_the_switch(monkeypatch):
 
 def test_atlas_shows_its_stages(monkeypatch, capsys):
     """jp.atlas runs for minutes on large meshes: its stages show on one bar (charts, flatten,
-    pack, compact), which ``verbose=False`` turns off."""
+    pack, compact, orders), which ``verbose=False`` turns off."""
     made = []
     original = prog.progress
 
@@ -107,7 +107,7 @@ def test_atlas_shows_its_stages(monkeypatch, capsys):
     jp.atlas(mesh, verbose=True)
     err = capsys.readouterr().err
     bar = made[0][1]
-    assert made[0][0] is True and bar.n == bar.total == 4 and bar.postfix == "compact"
+    assert made[0][0] is True and bar.n == bar.total == 5 and bar.postfix == "orders"
     assert "atlas:" in err
     jp.atlas(mesh, verbose=False)
     assert made[1][0] is False and capsys.readouterr().err == ""
