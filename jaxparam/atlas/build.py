@@ -50,7 +50,7 @@ def _flatten_subset(V, F, chart, faces_idx, en, start, weights, solver, max_iter
                else fl.convex_start(cm, weights=weights))
         cold = None
         if group is warm:
-            uv0, cold = fl.warm_uv(cm, uv0, prev[0][faces_idx[on]]), uv0
+            uv0, cold = fl.uv_of_corners(cm, prev[0][faces_idx[on]]), uv0
         uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters, cold=cold)
         cuv[on] = uv[cm.mesh.faces]
         for key, value in fl.chart_quality(cm, uv).items():
@@ -165,8 +165,7 @@ def _pieces_minimized(V, F, chart, corner_uv, new, parent, en, solver, max_iters
     todo = np.flatnonzero(np.isin(chart, parent[k0:]))
     labels, sub = np.unique(new[todo], return_inverse=True)
     cm = fl.chart_mesh(V, F[todo], sub)
-    uv0 = np.zeros((cm.mesh.n_vertices, 2))
-    uv0[cm.mesh.faces.reshape(-1)] = corner_uv[todo].reshape(-1, 2)
+    uv0 = fl.uv_of_corners(cm, corner_uv[todo])
     q0 = fl.chart_quality(cm, uv0)
     uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters)
     q = fl.chart_quality(cm, uv)
@@ -298,8 +297,7 @@ def _notches_filled(V, F, nbr, chart, corner_uv, en, solver, max_iters, max_aspe
     todo = np.flatnonzero(np.isin(new, touched))
     labels, sub = np.unique(new[todo], return_inverse=True)
     cm = fl.chart_mesh(V, F[todo], sub)
-    uv0 = np.zeros((cm.mesh.n_vertices, 2))
-    uv0[cm.mesh.faces.reshape(-1)] = cuv[todo].reshape(-1, 2)
+    uv0 = fl.uv_of_corners(cm, cuv[todo])
     uv, _ = fl.minimize_charts(cm, en, uv0, solver=solver, max_iters=max_iters)
     q = fl.chart_quality(cm, uv)
     bad = labels[(q["flips"] > 0) | (q["overlaps"] > 0) | (q["max_aspect"] > max_aspect)]

@@ -31,7 +31,7 @@ from ..triangles import doubled_areas
 from ..optimize import Problem, StopRules, solver_from
 
 __all__ = ["ChartMesh", "chart_mesh", "convex_start", "minimize_charts", "chart_quality",
-           "warm_charts", "warm_uv"]
+           "warm_charts", "uv_of_corners"]
 
 #: A chart of a split round starts from its parent's map (:func:`warm_charts`) when it holds at
 #: least this share of the parent's faces.
@@ -163,10 +163,10 @@ def warm_charts(chart: np.ndarray, corner_uv: np.ndarray, parent: np.ndarray,
     return warm & (np.bincount(chart, weights=inverted, minlength=k) == 0)
 
 
-def warm_uv(cm: ChartMesh, uv0: np.ndarray, corner_uv: np.ndarray) -> np.ndarray:
+def uv_of_corners(cm: ChartMesh, corner_uv: np.ndarray) -> np.ndarray:
     """``(n_uv, 2)``: the UVs that ``corner_uv (m, 3, 2)`` gives the corners of ``cm``'s faces
-    (one map per chart, so a UV vertex's corners agree)."""
-    uv = np.array(uv0, np.float64)
+    (one map per chart, so a UV vertex's corners agree; every UV vertex is a face's corner)."""
+    uv = np.zeros((cm.mesh.n_vertices, 2))
     uv[cm.mesh.faces.reshape(-1)] = corner_uv.reshape(-1, 2)
     return uv
 

@@ -113,9 +113,7 @@ def fill_notches(V: np.ndarray, F: np.ndarray, nbr: np.ndarray, chart: np.ndarra
         faces = np.flatnonzero(np.isin(chart, touched))
         labels, sub = np.unique(chart[faces], return_inverse=True)
         cm = fl.chart_mesh(V, F[faces], sub)
-        uv = np.zeros((cm.vertex.size, 2))
-        uv[cm.mesh.faces.reshape(-1)] = corner_uv[faces].reshape(-1, 2)
-        crossing = labels[fl.self_overlaps(cm, uv) > 0]
+        crossing = labels[fl.self_overlaps(cm, fl.uv_of_corners(cm, corner_uv[faces])) > 0]
         undo = np.isin(recv, crossing)
         chart[cand[undo]], corner_uv[cand[undo]] = before_chart[undo], before_uv[undo]
         moved += int((~undo).sum())
